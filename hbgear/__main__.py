@@ -1,0 +1,8 @@
+"""`python -m hbgear ...` -- same as the `hbgear` console script."""
+
+import sys
+
+from .cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,417 @@
+r"""The spur-gear pair with tooth friction as a periodic mechanical system (MODEL.md sections 2-4).
+
+Coordinates (SI):
+
+- boundary ``"torques"``: one coordinate, the dynamic transmission error (DTE) ``delta`` [m];
+- boundary ``"spring"`` / ``"reaction"``: ``q = (delta, u)`` with ``u = R_bg (theta_g - theta_g,s)``
+  [m] the gear's base-circle displacement about its static wind-up ``theta_g,s`` on the soft
+  output spring, so that ``R_bp theta_p = delta + u + u_s``.
+
+Equations of motion ``M q'' = Q(t, q, q')`` with, for two coordinates (``m_p = J_p/R_bp^2``,
+``m_g = J_g/R_bg^2``; the second row is the sum of the pinion and gear equations, so ``M`` is
+symmetric)::
+
+    [m_p   m_p      ] [delta'']   [ T_p/R_bp - F_mesh + T_fp/R_bp                                   ]
+    [m_p   m_p + m_g] [u''    ] = [ T_p/R_bp + T_fp/R_bp + T_fg/R_bg - T_g/R_bg - k_u (u+u_s) - c_u u' ]
+
+and for ``delta`` alone ``m_e delta'' = N - F_mesh + m_e (T_fp/(R_bp m_p) - T_fg/(R_bg m_g))``,
+``N = T_p / R_bp``, ``1/m_e = 1/m_p + 1/m_g``. The mesh force is
+``F_mesh = k(t) g(delta - eps) + c(t) (delta' - eps')`` and the friction torques
+``T_fp = -sum_j mu_j N_j xi_p,j``, ``T_fg = +sum_j mu_j N_j xi_g,j`` (MODEL.md section 3).
+
+The generalised force is split into a part that is affine in ``(q, q')`` with periodic
+coefficients (``part="linear"``; harmonic balance turns it into exact convolution matrices) and
+the rest (``part="nonlinear"``; harmonic balance evaluates it by alternating frequency-time).
+Which terms are linear depends on the coupling (LTI / LTV / NLTV), the formulation (A / B) and
+backlash. All functions take the mesh phase ``s`` in [0, 1) and an array module ``xp``
+(``numpy`` or ``jax.numpy``): the time integrator and the harmonic balance evaluate the same
+equations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from jax.tree_util import register_dataclass
+
+from .friction import FrictionLaw
+
+__all__ = ["GearPairModel", "PAIR_SLOTS"]
+
+#: Pair slots tracked in a mesh period; enough for any contact ratio below 2.
+PAIR_SLOTS = 2
+
+COUPLINGS = ("LTI", "LTV", "NLTV")
+FORMULATIONS = ("A", "B")
+BOUNDARIES = ("torques", "spring", "reaction")
+
+
+@register_dataclass
+@dataclass(frozen=True)
+class GearPairModel:
+    """All parameters of the gear pair in SI units, as a JAX pytree.
+
+    Float fields are pytree data (they may be traced: continuation in torque, damping, ...);
+    the string fields choose the structure of the equations and are static.
+
+    **Arguments:**
+
+    - `teeth_pinion`, `teeth_gear`: ``Z_p``, ``Z_g`` [-].
+    - `base_radius_pinion_m`, `base_radius_gear_m`: ``R_bp``, ``R_bg`` [m].
+    - `contact_start_m`: ``x_A`` [m]; `base_pitch_m`: ``p_b`` [m];
+      `line_of_action_m`: ``L`` [m]; `contact_ratio`: ``Gamma`` [-].
+    - `inertia_pinion_kgm2`, `inertia_gear_kgm2`: ``J_p``, ``J_g`` [kg m^2].
+    - `k_max_N_per_m`, `k_min_N_per_m`: mesh stiffness in double / single contact [N/m].
+    - `damping_ratio`: mesh damping ratio ``zeta`` [-], ``c = 2 zeta sqrt(k_mean m_e)``.
+    - `backlash_m`: total backlash ``2b`` [m] (used when `contact` is ``"backlash"``).
+    - `ste_amplitude_m`, `ste_phase_rad`: unloaded static transmission error per mesh order.
+    - `torque_pinion_Nm`: input torque ``T_p`` [N m].
+    - `friction`: a :class:`~hbgear.friction.FrictionLaw`.
+    - `face_width_m`: face width [m] (load per unit width for load-dependent laws).
+    - `spring_stiffness_ratio`: ``k_mean R_bg^2 / k_b`` [-]; `spring_damping_ratio`: damping
+      ratio of the soft output mode [-].
+    - `coupling`: ``"LTI" | "LTV" | "NLTV"``; `formulation`: ``"A" | "B"``;
+      `boundary`: ``"torques" | "spring" | "reaction"``;
+      `damping_model`: ``"constant" | "proportional"`` (``c(t) = c k(t)/k_mean``);
+      `contact`: ``"linear"`` (teeth never separate) or ``"backlash"``.
+    """
+
+    teeth_pinion: float
+    teeth_gear: float
+    base_radius_pinion_m: float
+    base_radius_gear_m: float
+    contact_start_m: float
+    base_pitch_m: float
+    line_of_action_m: float
+    contact_ratio: float
+    inertia_pinion_kgm2: float
+    inertia_gear_kgm2: float
+    k_max_N_per_m: float
+    k_min_N_per_m: float
+    damping_ratio: float
+    backlash_m: float
+    ste_amplitude_m: Any
+    ste_phase_rad: Any
+    torque_pinion_Nm: float
+    friction: FrictionLaw
+    face_width_m: float
+    spring_stiffness_ratio: float
+    spring_damping_ratio: float
+    coupling: str = field(default="LTV", metadata=dict(static=True))
+    formulation: str = field(default="A", metadata=dict(static=True))
+    boundary: str = field(default="spring", metadata=dict(static=True))
+    damping_model: str = field(default="constant", metadata=dict(static=True))
+    contact: str = field(default="linear", metadata=dict(static=True))
+
+    def __post_init__(self):
+        # pytree unflattening may pass placeholders; only check real strings
+        for name, allowed in (
+            ("coupling", COUPLINGS),
+            ("formulation", FORMULATIONS),
+            ("boundary", BOUNDARIES),
+            ("damping_model", ("constant", "proportional")),
+            ("contact", ("linear", "backlash")),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, str) and value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+
+    def replace(self, **changes) -> GearPairModel:
+        return replace(self, **changes)
+
+    # -- derived constants -------------------------------------------------------------------
+    @property
+    def ndof(self) -> int:
+        return 1 if self.boundary == "torques" else 2
+
+    @property
+    def k_mean_N_per_m(self):
+        """``k_mean = k_max (Gamma - 1) + k_min (2 - Gamma)`` [N/m]."""
+        g = self.contact_ratio
+        return self.k_max_N_per_m * (g - 1.0) + self.k_min_N_per_m * (2.0 - g)
+
+    @property
+    def mass_pinion_kg(self):
+        """``m_p = J_p / R_bp^2`` [kg]."""
+        return self.inertia_pinion_kgm2 / self.base_radius_pinion_m**2
+
+    @property
+    def mass_gear_kg(self):
+        """``m_g = J_g / R_bg^2`` [kg]."""
+        return self.inertia_gear_kgm2 / self.base_radius_gear_m**2
+
+    @property
+    def mass_equivalent_kg(self):
+        """``m_e = 1 / (1/m_p + 1/m_g)`` [kg]."""
+        return 1.0 / (1.0 / self.mass_pinion_kg + 1.0 / self.mass_gear_kg)
+
+    @property
+    def mesh_damping_Ns_per_m(self):
+        """``c = 2 zeta sqrt(k_mean m_e)`` [N s/m]."""
+        return 2.0 * self.damping_ratio * (self.k_mean_N_per_m * self.mass_equivalent_kg) ** 0.5
+
+    @property
+    def normal_load_N(self):
+        """Quasi-static total normal load ``N = T_p / R_bp`` [N]."""
+        return self.torque_pinion_Nm / self.base_radius_pinion_m
+
+    @property
+    def torque_gear_Nm(self):
+        """Applied output torque ``T_g`` [N m]: balances ``T_p`` for ``"torques"``, else 0."""
+        if self.boundary == "torques":
+            return self.torque_pinion_Nm * self.base_radius_gear_m / self.base_radius_pinion_m
+        return 0.0 * self.torque_pinion_Nm
+
+    @property
+    def spring_stiffness_N_per_m(self):
+        """Soft output spring in ``u`` coordinates, ``k_u = k_b / R_bg^2 = k_mean / ratio`` [N/m]."""
+        if self.boundary != "spring":
+            return 0.0 * self.k_max_N_per_m
+        return self.k_mean_N_per_m / self.spring_stiffness_ratio
+
+    @property
+    def spring_damping_Ns_per_m(self):
+        """``c_u = 2 zeta_b sqrt(k_u (m_p + m_g))`` [N s/m], the soft mode's own damping."""
+        mass = self.mass_pinion_kg + self.mass_gear_kg
+        return 2.0 * self.spring_damping_ratio * (self.spring_stiffness_N_per_m * mass) ** 0.5
+
+    @property
+    def spring_torsional_stiffness_Nm_per_rad(self):
+        """``k_b = k_mean R_bg^2 / ratio`` [N m/rad]."""
+        return self.spring_stiffness_N_per_m * self.base_radius_gear_m**2
+
+    def mass_matrix(self, xp=np):
+        """``M`` [kg], shape ``(ndof, ndof)``."""
+        if self.ndof == 1:
+            return xp.reshape(xp.asarray(self.mass_equivalent_kg), (1, 1))
+        mp, mg = self.mass_pinion_kg, self.mass_gear_kg
+        return xp.asarray([[mp, mp], [mp, mp + mg]])
+
+    def speeds(self, omega_pinion):
+        """``(Omega_p, Omega_g, w_m)`` [rad/s] from the pinion speed."""
+        return omega_pinion, omega_pinion * self.teeth_pinion / self.teeth_gear, omega_pinion * self.teeth_pinion
+
+    # -- mesh-phase functions ------------------------------------------------------------------
+    def pair_positions(self, s, xp=np):
+        """Contact positions and shares of the pair slots at mesh phase ``s``.
+
+        Returns ``(xi_p, xi_g, in_contact, sigma)``, each of shape ``(PAIR_SLOTS,) + s.shape``:
+        ``xi_p,k = x_A + p_b (s + k)`` [m], ``xi_g,k = L - xi_p,k``, contact while
+        ``s + k < Gamma``, equal load shares ``sigma_k`` among the pairs in contact (Eq. 13).
+        """
+        s = xp.asarray(s)
+        slots = xp.reshape(xp.arange(PAIR_SLOTS, dtype=s.dtype), (PAIR_SLOTS,) + (1,) * s.ndim)
+        age = s[None] + slots
+        xi_p = self.contact_start_m + self.base_pitch_m * age
+        xi_g = self.line_of_action_m - xi_p
+        in_contact = xp.where(age < self.contact_ratio, 1.0, 0.0)
+        sigma = in_contact / xp.sum(in_contact, axis=0)[None]
+        return xi_p, xi_g, in_contact, sigma
+
+    def mesh_stiffness(self, s, xp=np):
+        """Rectangular-pulse ``k(s)`` (Eq. 14) [N/m]."""
+        return xp.where(s < self.contact_ratio - 1.0, self.k_max_N_per_m, self.k_min_N_per_m)
+
+    def mesh_damping(self, s, xp=np):
+        """``c(s)`` [N s/m]: constant, or proportional to ``k(s)``."""
+        c = self.mesh_damping_Ns_per_m
+        if self.damping_model == "proportional":
+            return c * self.mesh_stiffness(s, xp) / self.k_mean_N_per_m
+        return c + 0.0 * s
+
+    def static_transmission_error(self, s, omega_mesh, xp=np):
+        """Unloaded STE ``eps = sum_n A_n cos(2 pi n s + phi_n)`` [m] and ``eps'`` [m/s]."""
+        amp = xp.asarray(self.ste_amplitude_m)
+        if amp.shape[0] == 0:
+            zero = 0.0 * s
+            return zero, zero
+        order = xp.arange(1, amp.shape[0] + 1)
+        phase = 2 * np.pi * order[:, None] * xp.ravel(s)[None] + xp.asarray(self.ste_phase_rad)[:, None]
+        eps = xp.sum(amp[:, None] * xp.cos(phase), axis=0)
+        deps = -omega_mesh * xp.sum((amp * order)[:, None] * xp.sin(phase), axis=0)
+        return xp.reshape(eps, xp.shape(s)), xp.reshape(deps, xp.shape(s))
+
+    def loaded_static_transmission_error(self, s, omega_mesh, xp=np):
+        """Loaded STE fluctuation ``eps + N/k(s) - <N/k>`` [m] (LTI excitation, Eq. 10)."""
+        eps, _ = self.static_transmission_error(s, omega_mesh, xp)
+        g = self.contact_ratio
+        mean_compliance = (g - 1.0) / self.k_max_N_per_m + (2.0 - g) / self.k_min_N_per_m
+        return eps + self.normal_load_N * (1.0 / self.mesh_stiffness(s, xp) - mean_compliance)
+
+    def contact_function(self, x, xp=np):
+        """``g(x)``: identity, or the backlash dead zone of half-width ``b`` [m]."""
+        if self.contact == "linear":
+            return x
+        b = 0.5 * self.backlash_m
+        return xp.where(x > b, x - b, xp.where(x < -b, x + b, 0.0 * x))
+
+    # -- velocities, forces ---------------------------------------------------------------------
+    def angular_velocities(self, qd, omega_pinion, nominal: bool):
+        """Total speeds ``(Omega_p + theta_p', Omega_g + theta_g')`` [rad/s].
+
+        ``theta_p' = (delta' + u')/R_bp``, ``theta_g' = u'/R_bg``; nominal speeds when
+        `nominal` (LTI, LTV) or when the model has the single coordinate ``delta``.
+        """
+        wp, wg, _ = self.speeds(omega_pinion)
+        if nominal or self.ndof == 1:
+            return wp + 0.0 * qd[0], wg + 0.0 * qd[0]
+        return wp + (qd[0] + qd[1]) / self.base_radius_pinion_m, wg + qd[1] / self.base_radius_gear_m
+
+    def mesh_force(self, s, q, qd, omega_pinion, xp=np):
+        """``F_mesh = k g(delta - eps) + c (delta' - eps')`` [N] (LTI: ``k_mean``, loaded STE)."""
+        _, _, wm = self.speeds(omega_pinion)
+        if self.coupling == "LTI":
+            # Eq. 10: k_mean (delta - d_st) + c (delta' - d_st'), d_st the loaded STE fluctuation;
+            # the impulsive part of c d_st' at stiffness jumps is applied by the caller
+            # (harmonic balance: exactly in the Fourier coefficients; time integration: as kicks).
+            eps, deps = self.static_transmission_error(s, wm, xp)
+            dst = self.loaded_static_transmission_error(s, wm, xp)
+            return self.k_mean_N_per_m * (q[0] - dst) + self.mesh_damping_Ns_per_m * (qd[0] - deps)
+        eps, deps = self.static_transmission_error(s, wm, xp)
+        return self.mesh_stiffness(s, xp) * self.contact_function(q[0] - eps, xp) + self.mesh_damping(s, xp) * (
+            qd[0] - deps
+        )
+
+    def pair_friction(self, s, q, qd, omega_pinion, xp=np):
+        """Per-pair sliding velocity, friction coefficient and normal load.
+
+        Returns a dict of arrays of shape ``(PAIR_SLOTS,) + s.shape``: ``xi_p``, ``xi_g`` [m],
+        ``sigma``, ``vs``, ``vr`` [m/s], ``mu`` [-], ``normal`` [N] and ``friction`` =
+        ``mu N_j`` [N]. ``mu`` uses the nominal kinematics and the quasi-static load for LTI and
+        LTV, the instantaneous ones for NLTV; the normal load is ``sigma_j N`` (formulation A)
+        or ``sigma_j F_mesh`` (formulation B).
+        """
+        xi_p, xi_g, _, sigma = self.pair_positions(s, xp)
+        nonlinear = self.coupling == "NLTV"
+        wp_tot, wg_tot = self.angular_velocities(qd, omega_pinion, nominal=not nonlinear)
+        vs = xi_p * wp_tot[None] - xi_g * wg_tot[None]
+        vr = xi_p * wp_tot[None] + xi_g * wg_tot[None]
+        quasi_static = sigma * self.normal_load_N
+        if self.formulation == "B":
+            normal = sigma * self.mesh_force(s, q, qd, omega_pinion, xp)[None]
+        else:
+            normal = quasi_static
+        law_load = normal if nonlinear else quasi_static
+        mu = self.friction.mu(vs, vr, law_load / self.face_width_m, xp)
+        return {
+            "xi_p": xi_p,
+            "xi_g": xi_g,
+            "sigma": sigma,
+            "vs": vs,
+            "vr": vr,
+            "mu": mu,
+            "normal": normal,
+            "friction": mu * normal,
+        }
+
+    def friction_torques(self, s, q, qd, omega_pinion, xp=np):
+        """``(T_fp, T_fg)`` [N m]: ``-sum mu_j N_j xi_p,j`` and ``+sum mu_j N_j xi_g,j``."""
+        pf = self.pair_friction(s, q, qd, omega_pinion, xp)
+        return -xp.sum(pf["friction"] * pf["xi_p"], axis=0), xp.sum(pf["friction"] * pf["xi_g"], axis=0)
+
+    # -- the split into linear-periodic and nonlinear parts -------------------------------------
+    @property
+    def mesh_is_linear(self) -> bool:
+        return self.contact == "linear"
+
+    @property
+    def friction_is_linear(self) -> bool:
+        """Friction is affine in the state unless NLTV, or formulation B with backlash."""
+        return self.coupling != "NLTV" and (self.formulation == "A" or self.mesh_is_linear)
+
+    @property
+    def is_linear(self) -> bool:
+        return self.mesh_is_linear and self.friction_is_linear
+
+    def generalized_force(self, s, q, qd, omega_pinion, part: str = "all", u_static=0.0, reaction=0.0, xp=np):
+        """``Q(s, q, q')``, shape ``(ndof,) + s.shape`` [N].
+
+        **Arguments:**
+
+        - `s`: mesh phase in [0, 1); `q`, `qd`: coordinates [m] and velocities [m/s], shape
+          ``(ndof,) + s.shape``; `omega_pinion`: ``Omega_p`` [rad/s].
+        - `part`: ``"linear"`` (terms affine in ``q, q'``), ``"nonlinear"`` or ``"all"``.
+        - `u_static`: the static wind-up ``u_s`` [m] (``"spring"``; see :meth:`static_windup`).
+        - `reaction`: output force ``T_g / R_bg`` [N] (``"reaction"``: an unknown of the solver).
+        """
+        take_mesh = part == "all" or (part == "linear") == self.mesh_is_linear
+        take_friction = part == "all" or (part == "linear") == self.friction_is_linear
+        take_constant = part in ("all", "linear")
+        zero = 0.0 * s
+        rbp, rbg = self.base_radius_pinion_m, self.base_radius_gear_m
+        mesh = self.mesh_force(s, q, qd, omega_pinion, xp) if take_mesh else zero
+        if take_friction:
+            t_fp, t_fg = self.friction_torques(s, q, qd, omega_pinion, xp)
+        else:
+            t_fp = t_fg = zero
+        if self.ndof == 1:
+            load = self.normal_load_N + zero if take_constant else zero
+            friction = self.mass_equivalent_kg * (t_fp / (rbp * self.mass_pinion_kg) - t_fg / (rbg * self.mass_gear_kg))
+            return xp.stack([load - mesh + friction])
+        row1 = -mesh + t_fp / rbp
+        row2 = t_fp / rbp + t_fg / rbg
+        if take_constant:
+            input_force = self.torque_pinion_Nm / rbp
+            output = self.torque_gear_Nm / rbg + reaction
+            spring = self.spring_stiffness_N_per_m * (q[1] + u_static) + self.spring_damping_Ns_per_m * qd[1]
+            row1 = row1 + input_force
+            row2 = row2 + input_force - output - spring
+        return xp.stack([row1, row2])
+
+    def lti_damping_impulse(self, s_jump, omega_pinion):
+        """Generalised impulse [N s] of ``c d_st'`` at a stiffness jump (LTI only).
+
+        ``d_st = N/k(s)`` jumps where ``k`` does; ``c d_st'`` then carries ``c [d_st]`` as an
+        impulse on the DTE row, which time integration applies as a velocity kick.
+        """
+        if self.coupling != "LTI":
+            return np.zeros(self.ndof)
+        before = self.loaded_static_transmission_error(np.asarray(s_jump - 1e-9) % 1.0, 0.0)
+        after = self.loaded_static_transmission_error(np.asarray(s_jump + 1e-9) % 1.0, 0.0)
+        impulse = self.mesh_damping_Ns_per_m * float(after - before)
+        return np.array([impulse] + [0.0] * (self.ndof - 1))
+
+    def phase_breakpoints(self) -> np.ndarray:
+        """Mesh phases in [0, 1) where the equations switch (numpy; for time integration)."""
+        g = float(self.contact_ratio)
+        tb = (self.pitch_point_m - float(self.contact_start_m)) / float(self.base_pitch_m)
+        points = {0.0, g - 1.0}
+        for slot in range(PAIR_SLOTS):
+            if 0.0 <= tb - slot < 1.0 and tb < g:
+                points.add(tb - slot)
+        return np.array(sorted(points))
+
+    @property
+    def pitch_point_m(self):
+        """``x_P``: where nominal sliding vanishes, ``L Z_p / (Z_p + Z_g)`` [m]."""
+        return self.line_of_action_m * self.teeth_pinion / (self.teeth_pinion + self.teeth_gear)
+
+    def breakpoint_candidates(self, xp=np):
+        """Phases where the equations may switch, traced-friendly (duplicates harmless)."""
+        tb = (self.pitch_point_m - self.contact_start_m) / self.base_pitch_m
+        return xp.stack([xp.asarray(self.contact_ratio - 1.0), tb, tb - 1.0])
+
+    def static_state(self, omega_pinion, xp=np):
+        """Quasi-static state ``(delta_s(s), u_s)`` about which the vibration is computed.
+
+        ``delta_s = eps + N/k(s)`` (+ half the backlash) carries the static load;
+        ``u_s`` [m] is the soft spring's wind-up that balances the mean output torque
+        including the mean friction torques of the quasi-static state (MODEL.md section 4):
+        ``k_u u_s = < T_p/R_bp + T_fp/R_bp + T_fg/R_bg - T_g/R_bg >``. Zero unless "spring".
+        """
+        from .quadrature import mesh_period_rule
+
+        s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
+        _, _, wm = self.speeds(omega_pinion)
+        eps, _ = self.static_transmission_error(s, wm, xp)
+        delta = eps + self.normal_load_N / self.mesh_stiffness(s, xp)
+        if self.contact == "backlash":
+            delta = delta + 0.5 * self.backlash_m
+        if self.boundary != "spring":
+            return delta, 0.0 * omega_pinion
+        q = xp.stack([delta, 0.0 * s])
+        force = self.generalized_force(s, q, 0.0 * q, omega_pinion, "all", 0.0, 0.0, xp)
+        # remove the spring's own term (q[1] = 0, qd = 0 -> it is zero) and average
+        return delta, xp.sum(w * force[1]) / self.spring_stiffness_N_per_m

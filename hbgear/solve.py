@@ -1,0 +1,197 @@
+"""One periodic steady state of the gear pair by harmonic balance.
+
+LTV models are linear: one exact solve of ``K_h(w) X = F(w)`` (the paper's Eq. 23).
+Nonlinear models (NLTV friction, backlash) start from the LTV solution of the same pair and
+run a damped Newton iteration; if that fails for a steep friction law, the law's smoothing
+velocity is continued from a gentle value down to the requested one. Non-convergence raises
+:class:`~hbgear.errors.ConvergenceError` with the speed, what was tried and the residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import jax.numpy as jnp
+import numpy as np
+
+from . import fourier
+from .errors import ConvergenceError
+from .hb import HarmonicBalance
+from .metrics import periodic_summary
+from .model import GearPairModel
+from .newton import newton
+from .quadrature import mesh_period_rule
+from .system import GearSystem
+
+__all__ = ["PeriodicSolution", "solve_periodic", "rpm_to_rad_s", "rad_s_to_rpm"]
+
+
+def rpm_to_rad_s(rpm):
+    return np.asarray(rpm) * (2 * np.pi / 60) if np.ndim(rpm) else float(rpm) * 2 * np.pi / 60
+
+
+def rad_s_to_rpm(omega):
+    return np.asarray(omega) * (60 / (2 * np.pi)) if np.ndim(omega) else float(omega) * 60 / (2 * np.pi)
+
+
+@dataclass(frozen=True)
+class PeriodicSolution:
+    """A converged harmonic-balance solution.
+
+    **Fields:** `model`; `omega_pinion` [rad/s]; `harmonics` ``H``; `nu`; `samples` ``N``;
+    `coefficients` [m], shape ``(ndof, 2H+1)`` (real basis of :mod:`hbgear.fourier` on the base
+    frequency ``w_m/nu``); `reaction_force_N` (``T_g/R_bg`` for the reaction boundary);
+    `u_static_m`; `residual_norm` (scaled by the static load); `iterations`; `z` (scaled
+    unknowns, for continuation).
+    """
+
+    model: GearPairModel
+    omega_pinion: float
+    harmonics: int
+    nu: int
+    samples: int
+    coefficients: np.ndarray
+    reaction_force_N: float
+    u_static_m: float
+    residual_norm: float
+    iterations: int
+    z: np.ndarray
+
+    @property
+    def speed_rpm(self) -> float:
+        return rad_s_to_rpm(self.omega_pinion)
+
+    @property
+    def base_frequency(self) -> float:
+        return self.model.speeds(self.omega_pinion)[2] / self.nu
+
+    def state_at(self, base_fraction):
+        """``(q, qd)`` at fractions of the base period, shapes ``(ndof, n)``."""
+        tau = 2 * np.pi * np.asarray(base_fraction, dtype=float)
+        k = np.arange(1, self.harmonics + 1)
+        cos, sin = np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau))
+        a, b = self.coefficients[:, 1::2], self.coefficients[:, 2::2]
+        w = self.base_frequency
+        q = self.coefficients[:, :1] + a @ cos + b @ sin
+        qd = w * ((b * k) @ cos - (a * k) @ sin)
+        return q, qd
+
+    def quadrature(self):
+        """Nodes (base fractions, mesh phases) and weights over one base period."""
+        s, w = mesh_period_rule(self.model.breakpoint_candidates(), 2 * self.harmonics // self.nu + 8)
+        s, w = np.asarray(s), np.asarray(w)
+        base = np.concatenate([(j + s) / self.nu for j in range(self.nu)])
+        return base, np.tile(s, self.nu), np.tile(w, self.nu) / self.nu
+
+    def summary(self) -> dict:
+        """The INTERFACE read-outs (µm, W) from exact quadrature over the period."""
+        base, s, w = self.quadrature()
+        q, qd = self.state_at(base)
+        out = periodic_summary(self.model, self.omega_pinion, s, q, qd, w, self.u_static_m, self.reaction_force_N)
+        dense = self.state_at(np.linspace(0.0, 1.0, 16 * self.harmonics + 1))[0][0]
+        out["dte_p2p_um"] = max(out["dte_p2p_um"], 1e6 * float(np.ptp(dense)))
+        return {k: float(v) for k, v in out.items()}
+
+    def harmonic_table(self):
+        """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
+        mean, amp, phase = fourier.harmonic_amplitudes(self.coefficients[0], self.harmonics)
+        rows = [(0.0, 1e6 * float(mean), 0.0)]
+        rows += [((k + 1) / self.nu, 1e6 * float(amp[k]), float(np.degrees(phase[k]))) for k in range(self.harmonics)]
+        return rows
+
+
+def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
+    hb = HarmonicBalance(model.ndof, harmonics, nu, samples)
+    return hb, GearSystem(model)
+
+
+def _newton(hb, system, omega, z0, tolerance, max_iterations):
+    def both(z):
+        r, jz, _ = hb.residual_and_jacobians(jnp.asarray(z), omega, system)
+        return r, jz
+
+    def resid(z):
+        return hb.residual(jnp.asarray(z), omega, system)
+
+    return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations)
+
+
+def _smoothing_field(model: GearPairModel):
+    law = model.friction
+    for name in ("v0", "v_reg"):
+        if hasattr(law, name) and getattr(law, name) > 0:
+            return name
+    return None
+
+
+def solve_periodic(
+    model: GearPairModel,
+    omega_pinion: float,
+    *,
+    harmonics: int = 24,
+    nu: int = 1,
+    samples: int | None = None,
+    tolerance: float = 1e-9,
+    max_iterations: int = 50,
+    z0: np.ndarray | None = None,
+) -> PeriodicSolution:
+    """The periodic steady state at pinion speed `omega_pinion` [rad/s].
+
+    **Raises:** :class:`ConvergenceError` when Newton (and the smoothing continuation for
+    steep friction laws) does not reach `tolerance`.
+    """
+    samples = samples or max(256, 4 * harmonics * nu)
+    samples += samples % nu
+    hb, system = _problem(model, harmonics, nu, samples)
+    omega = float(omega_pinion)
+    tried = []
+    if model.is_linear:
+        z = np.zeros(hb.size) if z0 is None else np.asarray(z0)
+        result = _newton(hb, system, omega, z, tolerance, 3)
+        tried.append("direct linear solve")
+    else:
+        if z0 is None:
+            linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
+            start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
+            z0 = start.z
+        result = _newton(hb, system, omega, z0, tolerance, max_iterations)
+        tried.append(f"Newton from the {'given' if z0 is not None else 'LTV'} start ({result.iterations} iterations)")
+        name = _smoothing_field(model)
+        if not result.converged and name is not None:
+            target = getattr(model.friction, name)
+            z = np.asarray(z0)
+            for v in np.geomspace(max(0.5, 50 * target), target, 12):
+                stage = model.replace(friction=replace(model.friction, **{name: float(v)}))
+                result = _newton(hb, GearSystem(stage), omega, z, tolerance, max_iterations)
+                if not result.converged:
+                    break
+                z = result.z
+            tried.append(f"continuation of the friction smoothing {name} down to {target:g} m/s")
+    if not result.converged:
+        raise ConvergenceError(
+            f"harmonic balance at {rad_s_to_rpm(omega):.6g} rpm (H={harmonics}, nu={nu}, N={samples}): "
+            f"tried {'; '.join(tried)}; residual {result.residual_norm:.3e} (relative to the static load) "
+            f"> tolerance {tolerance:.1e}"
+        )
+    z = np.asarray(result.z)
+    x = z * system.displacement_scale
+    reaction = 0.0
+    if system.free_mean_dof is not None:
+        slot = system.free_mean_dof * hb.block
+        reaction = float(z[slot] * system.force_scale)
+        x = x.copy()
+        x[slot] = 0.0
+    u_static = float(model.static_state(omega)[1]) if model.boundary == "spring" else 0.0
+    return PeriodicSolution(
+        model=model,
+        omega_pinion=omega,
+        harmonics=harmonics,
+        nu=nu,
+        samples=samples,
+        coefficients=x.reshape(model.ndof, hb.block),
+        reaction_force_N=reaction,
+        u_static_m=u_static,
+        residual_norm=result.residual_norm,
+        iterations=result.iterations,
+        z=z,
+    )

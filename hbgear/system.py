@@ -1,0 +1,126 @@
+r"""Periodic mechanical systems in the form the harmonic-balance engine solves.
+
+A system is ``M q'' = Q(s, q, q'; p)`` where ``s`` in [0, 1) is the phase of its excitation
+period ``2 pi / w_exc(p)``, ``p`` the scalar parameter being varied (a speed, a torque, ...), and
+``Q = Q_lin + Q_nl`` splits into terms affine in ``(q, q')`` with periodic coefficients
+(exact convolution) and the rest (alternating frequency-time). Protocol (duck-typed):
+
+- ``ndof`` (int), ``is_linear`` (bool), ``free_mean_dof`` (int or None: a coordinate whose mean
+  is pinned to 0 and replaced by a constant force unknown ``extra`` entering ``Q``),
+- ``mass_matrix(p, xp)``, ``excitation_frequency(p)`` [rad/s], ``breakpoints(p, xp)``,
+- ``force(s, q, qd, p, part, extra, xp)``, ``displacement_scale``, ``force_scale``.
+
+Systems are JAX pytrees, so changing their float parameters never triggers recompilation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from jax.tree_util import register_dataclass
+
+from .model import GearPairModel
+
+__all__ = ["GearSystem", "Duffing"]
+
+
+@register_dataclass
+@dataclass(frozen=True)
+class GearSystem:
+    """The gear pair as a periodic system in the parameter ``parameter``.
+
+    **Arguments:** `model`: the :class:`~hbgear.model.GearPairModel`; `omega_pinion`: the pinion
+    speed [rad/s] used when the parameter is not the speed; `parameter`: ``"speed"`` (the
+    parameter is ``Omega_p`` [rad/s]) or the name of a float field of the model
+    (``"torque_pinion_Nm"``, ``"damping_ratio"``, ...).
+    """
+
+    model: GearPairModel
+    omega_pinion: float = 0.0
+    parameter: str = field(default="speed", metadata=dict(static=True))
+
+    def _at(self, p):
+        if self.parameter == "speed":
+            return self.model, p
+        if self.parameter == "mu0":
+            return self.model.replace(friction=replace(self.model.friction, mu0=p)), self.omega_pinion
+        return self.model.replace(**{self.parameter: p}), self.omega_pinion
+
+    @property
+    def ndof(self) -> int:
+        return self.model.ndof
+
+    @property
+    def is_linear(self) -> bool:
+        return self.model.is_linear
+
+    @property
+    def free_mean_dof(self):
+        return 1 if self.model.boundary == "reaction" else None
+
+    @property
+    def displacement_scale(self):
+        return self.model.normal_load_N / self.model.k_mean_N_per_m
+
+    @property
+    def force_scale(self):
+        return self.model.normal_load_N
+
+    def mass_matrix(self, p, xp=np):
+        model, _ = self._at(p)
+        return model.mass_matrix(xp)
+
+    def excitation_frequency(self, p):
+        model, omega = self._at(p)
+        return model.speeds(omega)[2]
+
+    def breakpoints(self, p, xp=np):
+        model, _ = self._at(p)
+        return model.breakpoint_candidates(xp)
+
+    def force(self, s, q, qd, p, part, extra, xp=np):
+        model, omega = self._at(p)
+        u_static = model.static_state(omega, xp)[1] if model.boundary == "spring" else 0.0
+        return model.generalized_force(s, q, qd, omega, part, u_static, extra, xp)
+
+
+@register_dataclass
+@dataclass(frozen=True)
+class Duffing:
+    r"""``x'' + c x' + k x + a x^3 = f cos(w t)``; the parameter is ``w`` [rad/s].
+
+    A generic check of the engine and of continuation (known backbone and jump frequencies).
+    """
+
+    damping: float = 0.02
+    stiffness: float = 1.0
+    cubic: float = 0.1
+    forcing: float = 0.05
+
+    ndof = 1
+    free_mean_dof = None
+    displacement_scale = 1.0
+    force_scale = 1.0
+
+    @property
+    def is_linear(self) -> bool:
+        return False
+
+    def mass_matrix(self, p, xp=np):
+        return xp.ones((1, 1))
+
+    def excitation_frequency(self, p):
+        return p
+
+    def breakpoints(self, p, xp=np):
+        return xp.zeros(1)
+
+    def force(self, s, q, qd, p, part, extra, xp=np):
+        linear = self.forcing * xp.cos(2 * np.pi * s) - self.stiffness * q[0] - self.damping * qd[0]
+        nonlinear = -self.cubic * q[0] ** 3
+        if part == "linear":
+            return xp.stack([linear])
+        if part == "nonlinear":
+            return xp.stack([nonlinear])
+        return xp.stack([linear + nonlinear])
