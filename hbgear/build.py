@@ -60,6 +60,10 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
             )
     law = friction_law(cfg.friction)
     fr = cfg.friction
+    if fr.model == "NLTV" and law.discontinuous:
+        # sgn(Vs) of the instantaneous sliding velocity is regularised (documented, shared by HB
+        # and time integration): (2/pi) atan(Vs / v_reg)
+        law = law.regularized(fr.regularization_m_per_s)
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     contact = "backlash" if mesh.backlash_m > 0 else "linear"
     if coupling == "LTI" and formulation == "B":

@@ -89,8 +89,8 @@ def register(command: Command, *, replace: bool = False) -> Command:
 def _load_builtin_commands() -> None:
     """Register the shipped commands.
 
-    >>> LEAD: the built-in commands are registered by importing `hbgear.commands` (a
-    package whose modules call :func:`register`). Nothing else to change here.
+    The built-in commands are registered by importing `hbgear.commands` (a package whose
+    modules call :func:`register`).
     """
     if importlib.util.find_spec("hbgear.commands") is not None:
         importlib.import_module("hbgear.commands")

@@ -141,7 +141,10 @@ class FrictionConfig:
     **Fields:** `law` (none | coulomb | arctan | kelley-lemanski); `mu0` [-]; `v0_m_per_s`
     [m/s] (arctan smoothing speed); `formulation` ("A": quasi-static load, "B": dynamic mesh
     force); `model` (LTI | LTV | NLTV); `viscosity_Pa_s` [Pa s] and `roughness_um` [um, Rq]
-    (kelley-lemanski only; roughness kept in micrometres as the law's constants use it).
+    (kelley-lemanski only; roughness kept in micrometres as the law's constants use it);
+    `regularization_m_per_s` [m/s]: with model NLTV, a discontinuous law (coulomb,
+    kelley-lemanski) has ``sgn(Vs)`` replaced by ``(2/pi) atan(Vs / v_reg)`` -- the same in
+    harmonic balance and time integration (results converge as it shrinks).
     """
 
     law: str = "coulomb"
@@ -151,6 +154,7 @@ class FrictionConfig:
     model: str = "LTV"
     viscosity_Pa_s: float = 0.01
     roughness_um: float = 0.5
+    regularization_m_per_s: float = 0.005
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -599,6 +603,7 @@ _friction = _section("friction", FrictionConfig, {
     "model": _Key("model", _one_of(FRICTION_MODELS, fold=str.upper)),
     "viscosity_Pa_s": _Key("viscosity_Pa_s", _POSITIVE),
     "roughness_um": _Key("roughness_um", _num(0.0, lo_open=False)),
+    "regularization_m_per_s": _Key("regularization_m_per_s", _POSITIVE),
 })
 _boundary = _section("boundary", BoundaryConfig, {
     "output": _Key("output", _one_of(BOUNDARY_OUTPUTS)),

@@ -68,28 +68,44 @@ class HarmonicBalance:
         return system.excitation_frequency(p) / self.nu
 
     # -- the affine periodic part, exactly ----------------------------------------------------
-    def linear_operator(self, system, p):
-        """``(L, F)`` in SI: ``L = M D^2 + K_conv + C_conv D`` and the forcing vector ``F``."""
+    def _periodic_coefficients(self, system, p):
+        """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
+
+        ``Q_lin`` is affine in ``(q, q')``, so probing it at ``0`` and at unit vectors gives its
+        coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes.
+        """
         n, H, nu = self.ndof, self.harmonics, self.nu
         max_mesh_order = -(-2 * H // nu)
         s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
-        zeros = jnp.zeros((n,) + s.shape)
-        extra = 0.0
-        q0 = system.force(s, zeros, zeros, p, "linear", extra, jnp)
         eye = jnp.eye(n)
-        stiff = jnp.stack([q0 - system.force(s, zeros + eye[j][:, None], zeros, p, "linear", extra, jnp) for j in range(n)], axis=1)
-        damp = jnp.stack([q0 - system.force(s, zeros, zeros + eye[j][:, None], p, "linear", extra, jnp) for j in range(n)], axis=1)
-        coeff = partial(fourier_coefficients, s=s, w=w, max_order=max_mesh_order, xp=jnp)
-        base = partial(fourier.mesh_to_base, nu=nu, base_orders=2 * H + 1, xp=jnp)
-        k_conv = fourier.convolution_matrix(base(coeff(stiff)), H, jnp)  # (n, n, B, B)
-        c_conv = fourier.convolution_matrix(base(coeff(damp)), H, jnp)
-        forcing = fourier.coefficients_to_real(base(coeff(q0)), H, jnp)  # (n, B)
-        omega = self.base_frequency(system, p)
-        d = fourier.derivative_matrix(H, omega, jnp)
+        probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros((n, n))])
+        probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros((n, n)), eye])
+        ones = jnp.ones_like(s)
+
+        def force(qv, vv):
+            return system.force(s, qv[:, None] * ones, vv[:, None] * ones, p, "linear", 0.0, jnp)
+
+        values = jax.vmap(force)(probes_q, probes_v)  # (1+2n, n, nodes)
+        coeff = fourier_coefficients(values, s, w, max_mesh_order, jnp)
+        coeff = fourier.mesh_to_base(coeff, nu, 2 * H + 1, jnp)  # (1+2n, n, 2H+1)
+        forcing = coeff[0]
+        stiffness = jnp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
+        damping = jnp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
+        return forcing, stiffness, damping
+
+    def linear_operator(self, system, p):
+        """``(L, F, C_conv)`` in SI: ``L = M D^2 + K_conv + C_conv D``, forcing vector ``F``."""
+        H = self.harmonics
+        forcing, stiffness, damping = self._periodic_coefficients(system, p)
+        k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
+        c_conv = fourier.convolution_matrix(damping, H, jnp)
+        d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
         mass = system.mass_matrix(p, jnp)
         op = mass[:, :, None, None] * (d @ d)[None, None] + k_conv + c_conv @ d[None, None]
-        big = jnp.transpose(op, (0, 2, 1, 3)).reshape(self.size, self.size)
-        return big, forcing.reshape(self.size)
+        return self._flatten(op), fourier.coefficients_to_real(forcing, H, jnp).reshape(self.size), self._flatten(c_conv)
+
+    def _flatten(self, blocks):
+        return jnp.transpose(blocks, (0, 2, 1, 3)).reshape(self.size, self.size)
 
     # -- residual --------------------------------------------------------------------------------
     def _split(self, system, z):
@@ -102,46 +118,29 @@ class HarmonicBalance:
         extra = z[slot] * system.force_scale
         return x.at[slot].set(0.0), extra
 
-    def _residual(self, z, p, system, velocity_shift=None, pinned=True):
+    def _nonlinear(self, x, velocity, extra, p, system):
+        """``P Q_nl(E x, E v)`` in SI (zero for linear systems)."""
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
-        if pinned:
-            x, extra = self._split(system, z)
-        else:
-            x, extra = z * system.displacement_scale, 0.0
-        lin, forcing = self.linear_operator(system, p)
-        omega = self.base_frequency(system, p)
-        d = fourier.derivative_matrix(H, omega, jnp)
-        xc = x.reshape(n, self.block)
-        vc = xc @ d.T
-        if velocity_shift is not None:
-            vc = vc + velocity_shift.reshape(n, self.block) * system.displacement_scale
-            # the damping part of the linear operator acts on the shifted velocity too
-        r = lin @ x - forcing
-        if velocity_shift is not None:
-            r = r + self._damping_operator(system, p) @ (velocity_shift * system.displacement_scale)
-        k = system.free_mean_dof
-        if k is not None and pinned:
-            r = r.at[k * self.block].add(extra)
-        if not system.is_linear:
-            q = fourier.synthesize(xc, H, N, jnp)
-            qd = fourier.synthesize(vc, H, N, jnp)
-            s = jnp.mod(jnp.arange(N) * nu / N, 1.0)
-            fnl = system.force(s, q, qd, p, "nonlinear", extra, jnp)
-            r = r - fourier.project(fnl, H, jnp).reshape(self.size)
-        return r / system.force_scale
+        if system.is_linear:
+            return jnp.zeros(self.size)
+        q = fourier.synthesize(x.reshape(n, self.block), H, N, jnp)
+        qd = fourier.synthesize(velocity.reshape(n, self.block), H, N, jnp)
+        s = jnp.mod(jnp.arange(N) * nu / N, 1.0)
+        fnl = system.force(s, q, qd, p, "nonlinear", extra, jnp)
+        return fourier.project(fnl, H, jnp).reshape(self.size)
 
-    def _damping_operator(self, system, p):
-        """``C_conv`` (SI), the Galerkin matrix of the affine velocity terms."""
-        n, H, nu = self.ndof, self.harmonics, self.nu
-        max_mesh_order = -(-2 * H // nu)
-        s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
-        zeros = jnp.zeros((n,) + s.shape)
-        q0 = system.force(s, zeros, zeros, p, "linear", 0.0, jnp)
-        eye = jnp.eye(n)
-        damp = jnp.stack([q0 - system.force(s, zeros, zeros + eye[j][:, None], p, "linear", 0.0, jnp) for j in range(n)], axis=1)
-        coeff = fourier_coefficients(damp, s, w, max_mesh_order, jnp)
-        c_conv = fourier.convolution_matrix(fourier.mesh_to_base(coeff, nu, 2 * H + 1, jnp), H, jnp)
-        return jnp.transpose(c_conv, (0, 2, 1, 3)).reshape(self.size, self.size)
+    def _velocity(self, x, system, p):
+        d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
+        return (x.reshape(self.ndof, self.block) @ d.T).reshape(self.size)
+
+    def _residual(self, z, p, system, operator=None):
+        x, extra = self._split(system, z)
+        lin, forcing, _ = self.linear_operator(system, p) if operator is None else operator
+        r = lin @ x - forcing - self._nonlinear(x, self._velocity(x, system, p), extra, p, system)
+        k = system.free_mean_dof
+        if k is not None:
+            r = r.at[k * self.block].add(extra)
+        return r / system.force_scale
 
     @partial(jax.jit, static_argnums=0)
     def residual(self, z, p, system):
@@ -149,25 +148,45 @@ class HarmonicBalance:
         return self._residual(z, p, system)
 
     @partial(jax.jit, static_argnums=0)
+    def residual_and_jacobian(self, z, p, system):
+        """``(R, dR/dz)`` at fixed ``p`` (Newton): the affine part's Jacobian is its operator."""
+        operator = self.linear_operator(system, p)
+        r = self._residual(z, p, system, operator)
+        if system.is_linear:
+            scale = system.displacement_scale / system.force_scale
+            jac = operator[0] * scale
+            k = system.free_mean_dof
+            if k is not None:
+                slot = k * self.block
+                jac = jac.at[:, slot].set(0.0).at[slot, slot].add(1.0)
+            return r, jac
+        return r, jax.jacfwd(self._residual)(z, p, system, operator)
+
+    @partial(jax.jit, static_argnums=0)
     def residual_and_jacobians(self, z, p, system):
-        """``(R, dR/dz, dR/dp)``."""
+        """``(R, dR/dz, dR/dp)`` (continuation)."""
         r = self._residual(z, p, system)
         jz, jp = jax.jacfwd(self._residual, argnums=(0, 1))(z, p, system)
         return r, jz, jp
 
     @partial(jax.jit, static_argnums=0)
     def hill_matrices(self, z, p, system):
-        """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled."""
-        x, _ = self._split(system, z)
-        z_free = x / system.displacement_scale
-        zero = jnp.zeros_like(z)
-        jz, jv = jax.jacfwd(
-            lambda zz, vv: self._residual(zz, p, system, velocity_shift=vv, pinned=False), argnums=(0, 1)
-        )(z_free, zero)
-        omega = self.base_frequency(system, p)
-        d = fourier.derivative_matrix(self.harmonics, omega, jnp)
-        mass = system.mass_matrix(p, jnp) * system.displacement_scale / system.force_scale
-        eye = jnp.eye(self.block)
-        d2 = jnp.kron(mass, eye)
-        d1 = jv + 2 * jnp.kron(mass, d)
-        return jz, d1, d2
+        """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.
+
+        ``J = dR/dz``, ``D1 = 2 M (x) D + dR/d(velocity)``, ``D2 = M (x) I``.
+        """
+        x, extra = self._split(system, z)
+        lin, _, c_conv = self.linear_operator(system, p)
+        xs, fs = system.displacement_scale, system.force_scale
+
+        def response(xx, shift):
+            v = self._velocity(xx, system, p) + shift
+            return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system)) / fs
+
+        zero = jnp.zeros_like(x)
+        jz, jv = jax.jacfwd(response, argnums=(0, 1))(x, zero)
+        d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
+        mass = system.mass_matrix(p, jnp) / fs
+        d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
+        d1 = (jv + 2 * jnp.kron(mass, d)) * xs
+        return jz * xs, d1, d2

@@ -23,7 +23,7 @@ from .newton import newton
 from .quadrature import mesh_period_rule
 from .system import GearSystem
 
-__all__ = ["PeriodicSolution", "solve_periodic", "rpm_to_rad_s", "rad_s_to_rpm"]
+__all__ = ["PeriodicSolution", "solve_periodic", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
 
 
 def rpm_to_rad_s(rpm):
@@ -107,8 +107,7 @@ def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
 
 def _newton(hb, system, omega, z0, tolerance, max_iterations):
     def both(z):
-        r, jz, _ = hb.residual_and_jacobians(jnp.asarray(z), omega, system)
-        return r, jz
+        return hb.residual_and_jacobian(jnp.asarray(z), omega, system)
 
     def resid(z):
         return hb.residual(jnp.asarray(z), omega, system)
@@ -195,3 +194,47 @@ def solve_periodic(
         iterations=result.iterations,
         z=z,
     )
+
+
+def auto_harmonics(
+    model: GearPairModel,
+    omega_pinion: float,
+    *,
+    nu: int = 1,
+    tail_share: float = 1e-3,
+    max_harmonics: int = 512,
+    tolerance: float = 1e-9,
+    max_iterations: int = 50,
+) -> PeriodicSolution:
+    """Solve with ``H`` grown until the top quarter of the harmonics is negligible.
+
+    Starts above the mesh mode (``H >= 2 w_n / w``, ``w_n = sqrt(k_mean/m_e)``, since the mode
+    rings once per ``w / w_n`` of the base period at low speed) and doubles ``H`` until the RMS of
+    the DTE harmonics above ``3H/4`` is below `tail_share` of the DTE RMS. The ``H`` used is the
+    solution's ``harmonics``.
+
+    **Raises:** :class:`ConvergenceError` if ``max_harmonics`` is reached first.
+    """
+    omega_n = float((model.k_mean_N_per_m / model.mass_equivalent_kg) ** 0.5)
+    base = float(model.speeds(omega_pinion)[2]) / nu
+    harmonics = int(min(max_harmonics, max(16, 8 * int(np.ceil(2 * omega_n / base / 8)))))
+    z0 = None
+    while True:
+        solution = solve_periodic(
+            model, omega_pinion, harmonics=harmonics, nu=nu, tolerance=tolerance, max_iterations=max_iterations, z0=z0
+        )
+        _, amp, _ = fourier.harmonic_amplitudes(solution.coefficients[0], harmonics)
+        total = float(np.sqrt(np.sum(amp**2)))
+        tail = float(np.sqrt(np.sum(amp[(3 * harmonics) // 4 :] ** 2)))
+        if total == 0.0 or tail <= tail_share * total:
+            return solution
+        if harmonics >= max_harmonics:
+            raise ConvergenceError(
+                f"harmonics = 'auto' at {rad_s_to_rpm(omega_pinion):.6g} rpm: the top quarter still carries "
+                f"{tail / total:.2e} of the DTE at H = {harmonics} (limit {max_harmonics}); set solver.harmonics"
+            )
+        previous = solution.z.reshape(model.ndof, -1)
+        harmonics = min(max_harmonics, 2 * harmonics)
+        z0 = np.zeros((model.ndof, 2 * harmonics + 1))
+        z0[:, : previous.shape[1]] = previous
+        z0 = z0.ravel()
