@@ -1,0 +1,157 @@
+"""Harmonic balance, checked by independent routes: time integration, finite differences,
+direct linear solves, energy balance, convergence in H and in the friction regularisation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hbgear import fourier
+from hbgear.build import build_model
+from hbgear.config import load_config
+from hbgear.hb import HarmonicBalance
+from hbgear.simulate import simulate
+from hbgear.solve import auto_harmonics, rpm_to_rad_s, solve_periodic
+from hbgear.system import GearSystem
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
+
+
+def model_with(*overrides):
+    return build_model(load_config(EXAMPLE, list(overrides)))
+
+
+# -- the Fourier machinery -----------------------------------------------------------------------
+
+
+def test_convolution_matrix_is_the_product_in_time():
+    """T(p) x equals the projection of p(t) x(t) sampled finely (p with harmonics up to 2H)."""
+    rng = np.random.default_rng(1)
+    harmonics, samples = 6, 64
+    x = rng.normal(size=2 * harmonics + 1)
+    p = rng.normal(size=2 * harmonics + 1) + 1j * rng.normal(size=2 * harmonics + 1)
+    p[0] = p[0].real
+    tau = 2 * np.pi * np.arange(samples) / samples
+    p_t = p[0].real + 2 * np.real(sum(p[m] * np.exp(1j * m * tau) for m in range(1, 2 * harmonics + 1)))
+    product = fourier.project(p_t * fourier.synthesize(x, harmonics, samples), harmonics)
+    np.testing.assert_allclose(fourier.convolution_matrix(p, harmonics) @ x, product, atol=1e-12)
+
+
+def test_derivative_matrix_differentiates():
+    harmonics, samples, omega = 5, 64, 3.0
+    x = np.random.default_rng(2).normal(size=2 * harmonics + 1)
+    tau = 2 * np.pi * np.arange(samples) / samples
+    k = np.arange(1, harmonics + 1)
+    expected = omega * (np.cos(np.outer(tau, k)) @ (k * x[2::2]) - np.sin(np.outer(tau, k)) @ (k * x[1::2]))
+    np.testing.assert_allclose(
+        fourier.synthesize(fourier.derivative_matrix(harmonics, omega) @ x, harmonics, samples), expected, atol=1e-12
+    )
+
+
+# -- linear algebra of the LTV problem (Eq. 23) ---------------------------------------------------
+
+
+def test_ltv_newton_equals_direct_kh_solve():
+    """Newton from a random start lands on the direct solve of K_h(w) X = F(w)."""
+    model = model_with("boundary.output=torques")
+    hb, system, omega = HarmonicBalance(1, 16, 1, 64), GearSystem(model), rpm_to_rad_s(5000)
+    k_h, forcing, _ = hb.linear_operator(system, omega)
+    direct = np.linalg.solve(np.asarray(k_h), np.asarray(forcing))
+    start = np.random.default_rng(3).normal(size=hb.size)
+    solution = solve_periodic(model, omega, harmonics=16, samples=64, z0=start)
+    np.testing.assert_allclose(solution.coefficients.ravel(), direct, rtol=1e-10, atol=1e-18)
+
+
+def test_jax_jacobian_equals_finite_differences():
+    """NLTV (arctan, formulation B, spring): dR/dz and dR/dp against central differences."""
+    model = model_with("friction.model=NLTV", "friction.law=arctan", "friction.formulation=B", "mesh.damping_ratio=0.05")
+    hb, system, omega = HarmonicBalance(2, 6, 1, 64), GearSystem(model), rpm_to_rad_s(3000)
+    z = np.random.default_rng(4).normal(size=hb.size) * 0.3
+    z[0] = 1.0
+    _, jz, jp = hb.residual_and_jacobians(jnp.asarray(z), omega, system)
+    h = 1e-6
+    fd = np.empty((hb.size, hb.size))
+    for j in range(hb.size):
+        e = np.zeros(hb.size)
+        e[j] = h
+        fd[:, j] = (np.asarray(hb.residual(z + e, omega, system)) - np.asarray(hb.residual(z - e, omega, system))) / (2 * h)
+    np.testing.assert_allclose(np.asarray(jz), fd, atol=1e-6 * np.abs(fd).max())
+    hp = 1e-3 * omega
+    fd_p = (np.asarray(hb.residual(z, omega + hp, system)) - np.asarray(hb.residual(z, omega - hp, system))) / (2 * hp)
+    np.testing.assert_allclose(np.asarray(jp), fd_p, atol=1e-6 * np.abs(fd_p).max())
+
+
+# -- against time integration ------------------------------------------------------------------
+
+
+CASES = [
+    pytest.param(("friction.formulation=A",), 2400.0, id="LTV-A-2400"),
+    pytest.param(("friction.formulation=B",), 7000.0, id="LTV-B-7000"),
+    pytest.param(
+        ("friction.model=NLTV", "friction.law=arctan", "mesh.damping_ratio=0.05"), 3000.0, id="NLTV-arctan-3000"
+    ),
+]
+
+
+@pytest.mark.parametrize("overrides, speed_rpm", CASES)
+def test_hb_matches_time_integration(overrides, speed_rpm):
+    """RMS within 0.5 % and peak-to-peak within 1 % of time integration (spring boundary, H=32)."""
+    model = model_with("boundary.damping_ratio=0.1", *overrides)
+    omega = rpm_to_rad_s(speed_rpm)
+    hb = solve_periodic(model, omega, harmonics=32, samples=256).summary()
+    ti = simulate(model, omega).summary
+    assert hb["dte_rms_um"] == pytest.approx(ti["dte_rms_um"], rel=5e-3)
+    assert hb["dte_p2p_um"] == pytest.approx(ti["dte_p2p_um"], rel=1e-2)
+    assert hb["dynamic_factor"] == pytest.approx(ti["dynamic_factor"], rel=1e-2)
+
+
+# -- energy balance, convergence ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [("friction.formulation=A",), ("friction.formulation=B",), ("friction.model=NLTV", "friction.law=arctan")],
+    ids=["LTV-A", "LTV-B", "NLTV"],
+)
+def test_energy_balance_from_hb(overrides):
+    """Net input power = friction loss + <F_mesh delta'> within 0.5 % (spring boundary)."""
+    model = model_with("mesh.damping_ratio=0.05", *overrides)
+    s = solve_periodic(model, rpm_to_rad_s(4000), harmonics=24, samples=256).summary()
+    assert s["mean_power_loss_W"] > 0.0
+    assert s["mean_power_loss_W"] == pytest.approx(s["mean_friction_loss_W"] + s["mean_mesh_power_W"], rel=5e-3)
+
+
+def test_error_falls_monotonically_with_harmonics():
+    """LTV (torques): the DTE error against a H=96 reference falls as H grows."""
+    model = model_with("boundary.output=torques")
+    omega = rpm_to_rad_s(4000)
+    reference = solve_periodic(model, omega, harmonics=96).state_at(np.linspace(0, 1, 400, endpoint=False))[0][0]
+    errors = []
+    for harmonics in (4, 8, 16, 32):
+        dte = solve_periodic(model, omega, harmonics=harmonics).state_at(np.linspace(0, 1, 400, endpoint=False))[0][0]
+        errors.append(np.sqrt(np.mean((dte - reference) ** 2)))
+    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+    assert errors[-1] < 1e-2 * np.std(reference)
+
+
+def test_coulomb_regularisation_converges():
+    """NLTV Coulomb: the DTE RMS converges as the sgn regularisation velocity shrinks."""
+    rms = []
+    for v_reg in (0.02, 0.005, 0.00125):
+        model = model_with("friction.model=NLTV", f"friction.regularization_m_per_s={v_reg}", "mesh.damping_ratio=0.05")
+        rms.append(solve_periodic(model, rpm_to_rad_s(3000), harmonics=24, samples=256).summary()["dte_rms_um"])
+    steps = np.abs(np.diff(rms))
+    assert steps[1] < steps[0]
+    assert steps[1] < 1e-3 * rms[-1]
+
+
+def test_auto_harmonics_reports_h_and_meets_its_tail_criterion():
+    model = model_with("boundary.output=torques")
+    solution = auto_harmonics(model, rpm_to_rad_s(8000))
+    _, amp, _ = fourier.harmonic_amplitudes(solution.coefficients[0], solution.harmonics)
+    tail = np.sqrt(np.sum(amp[(3 * solution.harmonics) // 4 :] ** 2))
+    assert tail <= 1e-3 * np.sqrt(np.sum(amp**2))
+    assert solution.harmonics >= 16

@@ -1,0 +1,144 @@
+"""GearPairModel physics: stiffness spectrum, friction power, sliding direction, numpy == JAX."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hbgear.build import build_model
+from hbgear.config import parse_config
+from hbgear.quadrature import fourier_coefficients, mesh_period_rule
+
+jax.config.update("jax_enable_x64", True)
+
+BASE = {
+    "gear": dict(teeth_pinion=25, teeth_gear=31, module_mm=3.175, contact_ratio=1.433,
+                 inertia_pinion_kgm2=1.0594e-3, inertia_gear_kgm2=2.5047e-3),
+    "mesh": dict(k_max_MN_per_m=720.0, k_mean_MN_per_m=568.0, damping_ratio=0.01),
+    "load": dict(torque_pinion_Nm=226.0),
+}
+LAWS = {
+    "coulomb": {"law": "coulomb", "mu0": 0.1},
+    "arctan": {"law": "arctan", "mu0": 0.1, "v0_m_per_s": 0.01},
+    "kelley-lemanski": {"law": "kelley-lemanski"},
+    "none": {"law": "none"},
+}
+
+
+def model_for(law="coulomb", coupling="LTV", formulation="A", output="spring", **mesh):
+    data = {k: dict(v) for k, v in BASE.items()}
+    data["mesh"].update(mesh)
+    data["friction"] = dict(LAWS[law], model=coupling, formulation=formulation)
+    data["boundary"] = {"output": output}
+    return build_model(parse_config(data))
+
+
+def test_stiffness_fourier_coefficients():
+    model = model_for()
+    ta = model.contact_ratio - 1.0
+    dk = model.k_max_N_per_m - model.k_min_N_per_m
+    orders = 12
+    s, w = mesh_period_rule(model.phase_breakpoints(), orders)
+    coef = fourier_coefficients(model.mesh_stiffness(s), s, w, orders)
+    # closed form (MODEL.md section 2): f_n = (a_n - i b_n)/2
+    n = np.arange(1, orders + 1)
+    a = dk * np.sin(2 * np.pi * n * ta) / (n * np.pi)
+    b = dk * (1 - np.cos(2 * np.pi * n * ta)) / (n * np.pi)
+    assert coef[0].real == pytest.approx(model.k_mean_N_per_m, rel=1e-13)
+    np.testing.assert_allclose(coef[1:], (a - 1j * b) / 2, atol=1e-9 * dk)
+    # against an FFT of a finely sampled pulse (error O(1/N))
+    samples = 1 << 16
+    fft = np.fft.rfft(model.mesh_stiffness(np.arange(samples) / samples)) / samples
+    np.testing.assert_allclose(coef, fft[: orders + 1], atol=2 * dk / samples * orders)
+
+
+def friction_power(model, s, q, qd, wp):
+    """T_fp (Omega_p + theta_p') + T_fg (Omega_g + theta_g') with the speeds friction sees."""
+    t_fp, t_fg = model.friction_torques(s, q, qd, wp)
+    p, g = model.angular_velocities(qd, wp, nominal=model.coupling != "NLTV")
+    return t_fp * p + t_fg * g, model.pair_friction(s, q, qd, wp)
+
+
+MODELS = [
+    (law, coupling, form)
+    for law in LAWS
+    for coupling in ("LTI", "LTV", "NLTV")
+    for form in ("A", "B")
+    if not (coupling == "LTI" and form == "B")
+]
+_BUILT = {key: model_for(*key) for key in MODELS}
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    key=st.sampled_from(MODELS),
+    s=st.floats(0.0, 0.999999),
+    dfac=st.floats(0.5, 1.5),
+    ddot=st.floats(-0.5, 0.5),
+    udot=st.floats(-2.0, 2.0),
+    rpm=st.floats(10.0, 20000.0),
+)
+def test_friction_power_dissipative(key, s, dfac, ddot, udot, rpm):
+    model = _BUILT[key]
+    wp = rpm * math.pi / 30
+    s = np.asarray([s])
+    delta = dfac * model.normal_load_N / model.mesh_stiffness(s)
+    q = np.stack([delta, np.zeros(1)])
+    qd = np.stack([np.full(1, ddot * 1e-3), np.full(1, udot)])
+    assert np.all(model.mesh_force(s, q, qd, wp) > 0)  # teeth loaded: N_j >= 0 for formulation B
+    power, pf = friction_power(model, s, q, qd, wp)
+    assert power[0] <= 1e-9 * (1 + abs(power[0]))
+    # and it equals -sum |mu_j| N_j |Vs_j|
+    expected = -np.sum(np.abs(pf["mu"]) * pf["normal"] * np.abs(pf["vs"]), axis=0)
+    assert power[0] == pytest.approx(expected[0], rel=1e-9, abs=1e-9)
+
+
+def test_sliding_velocity_sign():
+    model = model_for()
+    wp = 3000 * math.pi / 30
+    s = np.linspace(0.0005, 0.9995, 2001)
+    q = np.zeros((2, s.size))
+    pf = model.pair_friction(s, q, q, wp)
+    xp = model.pitch_point_m
+    contact = pf["sigma"] > 0
+    before = contact & (pf["xi_p"] < xp - 1e-9)
+    after = contact & (pf["xi_p"] > xp + 1e-9)
+    assert before.any() and after.any()
+    assert np.all(pf["vs"][before] < 0)  # approach
+    assert np.all(pf["vs"][after] > 0)  # recess
+    wg = wp * 25 / 31
+    np.testing.assert_allclose(pf["vs"], (pf["xi_p"] - xp) * (wp + wg), atol=1e-12)
+    # Coulomb mu changes sign exactly at the pitch crossing phase, a breakpoint
+    assert np.all(pf["mu"][before] == -0.1) and np.all(pf["mu"][after] == 0.1)
+
+
+@pytest.mark.parametrize(
+    "key", [("arctan", "NLTV", "B"), ("kelley-lemanski", "NLTV", "A"), ("coulomb", "LTV", "B"),
+            ("coulomb", "LTI", "A")],
+)
+@pytest.mark.parametrize("output", ["spring", "torques"])
+def test_generalized_force_numpy_equals_jax(key, output):
+    if output == "torques" and key[1] == "NLTV":
+        pytest.skip("NLTV needs both gear speeds")
+    model = model_for(*key, output=output, ste_amplitude_um=[0.5, 0.2], ste_phase_deg=[10.0, 40.0])
+    rng = np.random.default_rng(1)
+    s = rng.uniform(0, 1, 64)
+    n = model.ndof
+    q = np.stack([rng.uniform(0.5, 1.5, 64) * 1e-5] + [rng.normal(0, 1e-5, 64)] * (n - 1))
+    qd = rng.normal(0, 0.05, (n, 64))
+    wp = 5000 * math.pi / 30
+    f_np = model.generalized_force(s, q, qd, wp, u_static=2.0)
+    f_jx = model.generalized_force(jnp.asarray(s), jnp.asarray(q), jnp.asarray(qd), wp, u_static=2.0, xp=jnp)
+    np.testing.assert_allclose(np.asarray(f_jx), f_np, rtol=1e-12, atol=1e-9)
+    for part in ("linear", "nonlinear"):
+        a = model.generalized_force(s, q, qd, wp, part=part, u_static=2.0)
+        b = model.generalized_force(jnp.asarray(s), jnp.asarray(q), jnp.asarray(qd), wp, part=part, u_static=2.0, xp=jnp)
+        np.testing.assert_allclose(np.asarray(b), a, rtol=1e-12, atol=1e-9)
+    # the split is complete
+    lin = model.generalized_force(s, q, qd, wp, part="linear", u_static=2.0)
+    non = model.generalized_force(s, q, qd, wp, part="nonlinear", u_static=2.0)
+    np.testing.assert_allclose(lin + non, f_np, rtol=1e-12, atol=1e-9)
