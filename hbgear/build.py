@@ -50,9 +50,11 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
     if mesh.k_min_N_per_m is not None:
         k_min = mesh.k_min_N_per_m
     else:
-        # k_mean = k_max (Gamma-1) + k_min (2-Gamma) -> k_min; k_max, k_min belong to the teeth
-        k_min = (mesh.k_mean_N_per_m - mesh.k_max_N_per_m * (gamma - 1.0)) / (2.0 - gamma)
-        if contact_ratio is None and not (0.0 < k_min <= mesh.k_max_N_per_m):
+        # k_mean = k_max (Gamma-1) + k_min (2-Gamma) at the CONFIGURED contact ratio -> k_min;
+        # k_max and k_min belong to the teeth and are held when the contact ratio is varied
+        gamma_config = geometry.contact_ratio if contact_ratio is None else build_geometry(cfg.gear).contact_ratio
+        k_min = (mesh.k_mean_N_per_m - mesh.k_max_N_per_m * (gamma_config - 1.0)) / (2.0 - gamma_config)
+        if not (0.0 < k_min <= mesh.k_max_N_per_m):
             raise ConfigError(
                 "mesh.k_mean_MN_per_m",
                 mesh.k_mean_N_per_m / 1e6,

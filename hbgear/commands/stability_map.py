@@ -1,0 +1,298 @@
+"""`hbgear stability-map CONFIG`: max |Floquet multiplier| over speed x contact ratio.
+
+Grid from ``[map]`` (``k_max`` and ``k_min`` held as the contact ratio varies). One unit of
+work is one contact ratio (a row of the map, :func:`compute_row`): linear models (LTI, LTV A
+or B) use the batched exact monodromy of :mod:`hbgear.stability`, others harmonic balance +
+Hill's method at every speed.
+
+Runs locally by default. With ``map.scheduler`` in the config or ``--scheduler ADDRESS``, the
+rows are Dask futures on that cluster (``dask.distributed.Client(ADDRESS)``; needs
+``pip install hbgear[distributed]``).
+
+Resuming: every finished row is appended to ``stability.partial.csv`` in the output directory
+(flushed and fsynced per row; its first line is a fingerprint of the configuration and the
+grid). Re-running the same command skips the rows found there; ``--fresh`` ignores them. At the
+end ``stability.csv`` (``speed_rpm, contact_ratio, max_abs_floquet``) and ``stability.png`` are
+written atomically and the partial file is removed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..cli import Command, register
+from ..errors import ConfigError
+from ..io import save_figure_atomic, to_jsonable, write_csv_atomic, write_text_atomic
+
+__all__ = ["STABILITY_MAP", "compute_row", "grid", "plot_stability_map", "run_map"]
+
+HEADER = ("speed_rpm", "contact_ratio", "max_abs_floquet")
+PARTIAL = "stability.partial.csv"
+#: The unit contour is drawn at 1 + this, so a neutral mode (the soft output spring's, whose
+#: modulus is 1 to within rounding) does not draw noise all over the map.
+CONTOUR_MARGIN = 1e-6
+
+
+def grid(config) -> tuple[np.ndarray, np.ndarray]:
+    """``(speeds_rpm, contact_ratios)`` of ``[map]``."""
+    m = config.map
+    speeds = np.linspace(m.speed_rpm_start, m.speed_rpm_stop, int(m.speed_steps))
+    ratios = np.linspace(m.contact_ratio_start, m.contact_ratio_stop, int(m.contact_ratio_steps))
+    return speeds, ratios
+
+
+def compute_row(config, contact_ratio: float, speeds_rpm) -> np.ndarray:
+    """max |multiplier| at every speed for one contact ratio (the task sent to workers)."""
+    from ..stability import stability_row
+
+    return np.asarray(stability_row(config, float(contact_ratio), np.asarray(speeds_rpm, float)), dtype=float)
+
+
+# ----------------------------------------------------------------------------- partial file
+
+
+def _fingerprint(config, speeds, ratios) -> str:
+    data = to_jsonable(config.to_dict())
+    data.get("map", {}).pop("scheduler", None)
+    data["grid"] = {"speeds_rpm": [repr(float(s)) for s in speeds], "contact_ratios": [repr(float(g)) for g in ratios]}
+    text = json.dumps(data, sort_keys=True, default=str)
+    return "# hbgear stability-map partial; sha256=" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def _row_lines(ratio: float, speeds, values) -> str:
+    return "".join(f"{float(s)!r},{float(ratio)!r},{float(v)!r}\n" for s, v in zip(speeds, values))
+
+
+def _load_partial(path: Path, fingerprint: str, speeds, ratios) -> dict[int, np.ndarray]:
+    """Complete rows of a previous run of the same map (index into `ratios` -> values)."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (FileNotFoundError, UnicodeDecodeError):
+        return {}
+    if len(lines) < 2 or lines[0] != fingerprint or lines[1] != ",".join(HEADER):
+        return {}
+    index = {float(g): i for i, g in enumerate(ratios)}
+    column = {float(s): k for k, s in enumerate(speeds)}
+    found: dict[int, dict[int, float]] = {}
+    for line in lines[2:]:
+        parts = line.split(",")
+        if len(parts) != 3:
+            continue
+        try:
+            s, g, v = (float(x) for x in parts)
+        except ValueError:
+            continue
+        if g in index and s in column:
+            found.setdefault(index[g], {})[column[s]] = v
+    return {i: np.array([row[k] for k in range(len(speeds))]) for i, row in found.items() if len(row) == len(speeds)}
+
+
+class _PartialWriter:
+    """Append-only, per-row flushed and fsynced log of finished rows."""
+
+    def __init__(self, path: Path, fingerprint: str, speeds, done: dict[int, np.ndarray], ratios):
+        # rewrite the valid part atomically first: a row cut by a crash must not glue onto the next
+        text = fingerprint + "\n" + ",".join(HEADER) + "\n"
+        text += "".join(_row_lines(ratios[i], speeds, done[i]) for i in sorted(done))
+        write_text_atomic(path, text)
+        self.path, self.speeds = path, speeds
+        self.fh = open(path, "a", encoding="utf-8", newline="")
+
+    def add(self, ratio: float, values) -> None:
+        self.fh.write(_row_lines(ratio, self.speeds, values))
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+# ----------------------------------------------------------------------------- running
+
+
+def _connect(address: str):
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ConfigError(
+            "map.scheduler", address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]"
+        ) from None
+    return Client(address)
+
+
+def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool = False, progress: bool = True):
+    """Compute the map (resuming from the partial file) and write the outputs.
+
+    **Returns:** ``(speeds_rpm, contact_ratios, values)`` with values of shape
+    ``(len(contact_ratios), len(speeds_rpm))``.
+    """
+    from tqdm import tqdm
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    speeds, ratios = grid(config)
+    fingerprint = _fingerprint(config, speeds, ratios)
+    partial = out_dir / PARTIAL
+    done = {} if fresh else _load_partial(partial, fingerprint, speeds, ratios)
+    todo = [i for i in range(len(ratios)) if i not in done]
+    writer = _PartialWriter(partial, fingerprint, speeds, done, ratios)
+    bar = tqdm(total=len(ratios), initial=len(done), desc="stability-map", unit="row", disable=not progress or None)
+    try:
+        if scheduler is None:
+            for i in todo:
+                done[i] = compute_row(config, ratios[i], speeds)
+                writer.add(ratios[i], done[i])
+                bar.update(1)
+        elif todo:
+            client = _connect(scheduler)
+            try:
+                from dask.distributed import as_completed
+
+                futures = {
+                    client.submit(compute_row, config, float(ratios[i]), speeds, pure=False): i for i in todo
+                }
+                try:
+                    for future in as_completed(futures):
+                        i = futures[future]
+                        done[i] = np.asarray(future.result(), dtype=float)
+                        writer.add(ratios[i], done[i])
+                        bar.update(1)
+                except BaseException:
+                    client.cancel(list(futures))
+                    raise
+            finally:
+                client.close()
+    finally:
+        bar.close()
+        writer.close()
+    values = np.stack([done[i] for i in range(len(ratios))])
+    write_csv_atomic(
+        out_dir / "stability.csv",
+        HEADER,
+        ((float(s), float(g), float(values[i, k])) for i, g in enumerate(ratios) for k, s in enumerate(speeds)),
+    )
+    fig = plot_stability_map(speeds, ratios, values, title=_title(config))
+    try:
+        save_figure_atomic(fig, out_dir / "stability.png", dpi=130)
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    partial.unlink(missing_ok=True)
+    return speeds, ratios, values
+
+
+def _title(config) -> str:
+    f = config.friction
+    return (
+        f"max |Floquet multiplier| per mesh period: {f.model}-{f.formulation}, {f.law} mu0={f.mu0:g}, "
+        f"zeta={config.mesh.damping_ratio:g}, boundary {config.boundary.output}"
+    )
+
+
+def plot_stability_map(speeds_rpm, contact_ratios, values, title: str = "", ax=None):
+    """Colour map of max |multiplier| over speed x contact ratio with the unit contour.
+
+    **Returns:** the matplotlib ``Figure``.
+    """
+    import matplotlib
+
+    if ax is None:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    speeds_rpm, contact_ratios = np.asarray(speeds_rpm), np.asarray(contact_ratios)
+    values = np.asarray(values, dtype=float)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(7.5, 4.8), layout="constrained")
+    else:
+        fig = ax.figure
+    finite = values[np.isfinite(values)]
+    lo = float(finite.min()) if finite.size else 0.5
+    hi = float(finite.max()) if finite.size else 1.5
+    lo, hi = min(lo, 1.0 - 1e-3), max(hi, 1.0 + 1e-3)
+    if len(speeds_rpm) > 1 and len(contact_ratios) > 1:
+        mesh = ax.pcolormesh(
+            speeds_rpm, contact_ratios, values, shading="nearest", cmap="RdBu_r", norm=TwoSlopeNorm(1.0, lo, hi)
+        )
+        fig.colorbar(mesh, ax=ax, label="max |multiplier|")
+        if np.nanmin(values) < 1.0 + CONTOUR_MARGIN < np.nanmax(values):
+            ax.contour(speeds_rpm, contact_ratios, values, levels=[1.0 + CONTOUR_MARGIN], colors="k", linewidths=1.2)
+        ax.set_ylabel("contact ratio Gamma [-]")
+    else:
+        for i, g in enumerate(contact_ratios):
+            ax.plot(speeds_rpm, values[i], ".-", label=f"Gamma = {g:.4g}")
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.set_ylabel("max |multiplier|")
+        ax.legend(fontsize=8)
+    ax.set_xlabel("pinion speed [rpm]")
+    ax.set_title(title, fontsize=8)
+    return fig
+
+
+# ----------------------------------------------------------------------------- command
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler address (e.g. tcp://host:8786): one task per contact ratio; "
+        "overrides map.scheduler",
+    )
+    parser.add_argument("--fresh", action="store_true", help="ignore rows left by an interrupted run")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _scheduler(config, args) -> str | None:
+    return args.scheduler if getattr(args, "scheduler", None) else config.map.scheduler
+
+
+def _validate(config, args) -> None:
+    address = _scheduler(config, args)
+    key = "--scheduler" if getattr(args, "scheduler", None) else "map.scheduler"
+    if address is not None:
+        if not isinstance(address, str) or not address.strip():
+            raise ConfigError(key, address, 'a Dask scheduler address such as "tcp://host:8786"')
+        try:
+            import dask.distributed  # noqa: F401
+        except ImportError:
+            raise ConfigError(key, address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
+
+
+def _run(config, args, out_dir: Path) -> int:
+    speeds, ratios, values = run_map(
+        config, out_dir, scheduler=_scheduler(config, args), fresh=args.fresh, progress=not args.no_progress
+    )
+    bad = int(np.sum(~np.isfinite(values)))
+    unstable = int(np.sum(values > 1.0 + 1e-9))
+    print(
+        f"stability map: {len(ratios)} contact ratios x {len(speeds)} speeds, {unstable} unstable points, "
+        f"max |multiplier| {np.nanmax(values) if np.isfinite(values).any() else math.nan:.6g} -> {out_dir}",
+        file=sys.stderr,
+    )
+    if bad:
+        print(f"hbgear: warning: {bad} points did not converge (nan in stability.csv)", file=sys.stderr)
+    return 0
+
+
+STABILITY_MAP = register(
+    Command(
+        name="stability-map",
+        help="max |Floquet multiplier| over speed x contact ratio ([map]) -> stability.csv, stability.png",
+        add_arguments=_add_arguments,
+        run=_run,
+        validate=_validate,
+    ),
+    replace=True,
+)

@@ -1,0 +1,205 @@
+"""hbgear.stability and `hbgear stability-map`: Hill = exact monodromy, parametric tongues,
+distributed = local, resume without recomputation."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+from scipy.optimize import linear_sum_assignment
+
+from hbgear import stability as st
+from hbgear.build import build_model
+from hbgear.config import load_config
+from hbgear.hb import HarmonicBalance
+from hbgear.system import GearSystem
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
+RPM = 60.0 / (2.0 * np.pi)
+
+
+def config(*overrides):
+    return load_config(EXAMPLE, list(overrides))
+
+
+def model(boundary="torques", zeta=0.01, formulation="A"):
+    return build_model(
+        config(f'boundary.output="{boundary}"', f"mesh.damping_ratio={zeta}", f'friction.formulation="{formulation}"')
+    )
+
+
+def natural_frequency(m):
+    return math.sqrt(m.k_mean_N_per_m / m.mass_equivalent_kg)
+
+
+def tongue_rpm(m, j):
+    """Pinion speed of the j-th parametric tongue, w_m = 2 w_n / j."""
+    return 2.0 * natural_frequency(m) / j / m.teeth_pinion * RPM
+
+
+def max_pair_distance(a, b):
+    assert len(a) == len(b), (a, b)
+    d = np.abs(np.asarray(a)[:, None] - np.asarray(b)[None, :])
+    rows, cols = linear_sum_assignment(d)
+    return d[rows, cols].max()
+
+
+# ----------------------------------------------------------------------------- Hill = monodromy
+
+
+@pytest.mark.parametrize(
+    "boundary, where",
+    [("torques", "tongue"), ("torques", "stable"), ("spring", "tongue"), ("reaction", "stable")],
+)
+def test_hill_multipliers_equal_exact_monodromy_ltv_a(boundary, where):
+    m = model(boundary)
+    rpm = tongue_rpm(m, 1) if where == "tongue" else 20000.0
+    omega = rpm / RPM
+    exact = st.multipliers_linear(m, omega)
+    hb = HarmonicBalance(m.ndof, 32, 1, 132)
+    hill = st.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m))  # linear: J independent of z
+    assert len(exact) == len(hill) == 2 * m.ndof - (2 if boundary == "reaction" else 0)
+    assert max_pair_distance(hill, exact) < 1e-6
+    assert st.is_stable(exact) == (where == "stable")
+
+
+def test_monodromy_ltv_a_is_product_of_expm_and_rejects_other_models():
+    m = model("torques")
+    omega = 15000.0 / RPM
+    tm = 2 * np.pi / (m.teeth_pinion * omega)
+    edges = np.append(m.phase_breakpoints(), 1.0)
+    phi = np.eye(2)
+    for a, b in zip(edges[:-1], edges[1:]):
+        k = float(m.mesh_stiffness(0.5 * (a + b)))
+        c = float(m.mesh_damping_Ns_per_m)
+        me = float(m.mass_equivalent_kg)
+        phi = expm(np.array([[0, 1], [-k / me, -c / me]]) * (b - a) * tm) @ phi
+    np.testing.assert_allclose(st.monodromy_ltv_a(m, omega), phi, rtol=1e-11, atol=1e-13 * np.abs(phi).max())
+    with pytest.raises(ValueError, match="formulation"):
+        st.monodromy_ltv_a(model("torques", formulation="B"), omega)
+
+
+def test_expm_batched_matches_scipy():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(50, 4, 4)) * np.logspace(-3, 2, 50)[:, None, None]
+    ref = np.stack([expm(x) for x in a])
+    np.testing.assert_allclose(st.expm_batched(a), ref, rtol=1e-11, atol=1e-12 * np.abs(ref).max())
+
+
+def test_formulation_b_magnus_equals_variational_equations():
+    m = model("torques", formulation="B")
+    omega = 26000.0 / RPM
+    magnus = st.monodromy_linear(m, omega)
+    variational = st.monodromy_variational(m, lambda tau: (np.zeros((1, 1)), np.zeros((1, 1))), omega)
+    np.testing.assert_allclose(magnus, variational, rtol=1e-7, atol=1e-9 * np.abs(magnus).max())
+    # friction as a parameter (B) changes the multipliers, as an excitation (A) it cannot
+    assert max_pair_distance(np.linalg.eigvals(magnus), st.multipliers_linear(model("torques"), omega)) > 1e-4
+
+
+# ----------------------------------------------------------------------------- tongues
+
+
+def test_map_reproduces_parametric_tongues():
+    m = model("torques", zeta=0.005)
+    centres = [tongue_rpm(m, j) for j in (1, 3)]
+    between = [tongue_rpm(m, 1.5), tongue_rpm(m, 2.5), tongue_rpm(m, 3.5)]
+    values = st.stability_map_ltv_a([m], centres + between)[0]
+    assert np.all(values[:2] > 1.0), values
+    assert np.all(values[2:] < 1.0), values
+    # j = 2 (even: a fold, multiplier through +1) is narrow; a light damping and a fine scan
+    light = model("torques", zeta=0.001)
+    scan = np.linspace(0.97, 1.01, 401) * tongue_rpm(light, 2)
+    assert st.stability_map_ltv_a([light], scan)[0].max() > 1.0
+    # types of instability: real multiplier through -1 (odd j), through +1 (even j)
+    odd = st.multipliers_linear(m, centres[0] / RPM)
+    assert st.period_doubling(odd) and st.classify(odd).kind == "period-doubling"
+    worst = scan[np.argmax(st.stability_map_ltv_a([light], scan)[0])]
+    even = st.multipliers_linear(light, worst / RPM)
+    assert not st.period_doubling(even) and st.classify(even).kind == "fold"
+
+
+def test_map_holds_tooth_stiffnesses_and_shifts_zone_with_contact_ratio():
+    cfg = config('boundary.output="torques"')
+    lo, hi = st.model_at_contact_ratio(cfg, 1.35), st.model_at_contact_ratio(cfg, 1.65)
+    assert lo.k_min_N_per_m == hi.k_min_N_per_m and lo.k_max_N_per_m == hi.k_max_N_per_m
+    speeds = np.linspace(20000, 32000, 121)
+    values = st.stability_map_ltv_a(cfg, speeds, [1.35, 1.65])
+    centre = [np.average(speeds, weights=np.clip(v - 1, 0, None)) for v in values]
+    assert centre[1] > centre[0] + 500  # k_mean grows with Gamma
+
+
+# ----------------------------------------------------------------------------- command
+
+
+@pytest.fixture
+def small_config():
+    return config(
+        'boundary.output="torques"',
+        "map.speed_steps=6",
+        "map.contact_ratio_steps=3",
+        "map.speed_rpm_start=24000.0",
+        "map.speed_rpm_stop=30000.0",
+    )
+
+
+def test_dask_path_equals_local_path(small_config, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    from hbgear.commands import stability_map as cmd
+
+    local = cmd.run_map(small_config, tmp_path / "local", progress=False)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        remote = cmd.run_map(small_config, tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
+    np.testing.assert_array_equal(local[2], remote[2])
+    assert (tmp_path / "dask" / "stability.csv").read_text() == (tmp_path / "local" / "stability.csv").read_text()
+    assert not (tmp_path / "dask" / cmd.PARTIAL).exists()
+
+
+def test_resume_skips_finished_rows(small_config, tmp_path, monkeypatch):
+    from hbgear.commands import stability_map as cmd
+
+    speeds, ratios = cmd.grid(small_config)
+    fingerprint = cmd._fingerprint(small_config, speeds, ratios)
+    finished = {0: np.full(len(speeds), 0.25), 2: np.full(len(speeds), 0.75)}
+    text = fingerprint + "\nspeed_rpm,contact_ratio,max_abs_floquet\n"
+    text += cmd._row_lines(ratios[0], speeds, finished[0]) + cmd._row_lines(ratios[2], speeds, finished[2])
+    text += cmd._row_lines(ratios[1], speeds[:2], [9.0, 9.0])  # an incomplete row ...
+    text += f"{speeds[2]!r},{ratios[1]!r},9."  # ... cut by a crash
+    (tmp_path / cmd.PARTIAL).write_text(text)
+    calls = []
+    real = cmd.compute_row
+
+    def counting(cfg, ratio, sp):
+        calls.append(ratio)
+        return real(cfg, ratio, sp)
+
+    monkeypatch.setattr(cmd, "compute_row", counting)
+    _, _, values = cmd.run_map(small_config, tmp_path, progress=False)
+    assert calls == [ratios[1]]
+    np.testing.assert_array_equal(values[0], finished[0])
+    np.testing.assert_array_equal(values[2], finished[2])
+    np.testing.assert_allclose(values[1], st.stability_row(small_config, ratios[1], speeds))
+    assert not (tmp_path / cmd.PARTIAL).exists()
+    lines = (tmp_path / "stability.csv").read_text().splitlines()
+    assert lines[0] == "speed_rpm,contact_ratio,max_abs_floquet" and len(lines) == 1 + 18
+
+    # a partial file of another configuration is not trusted
+    (tmp_path / cmd.PARTIAL).write_text(text.replace("sha256=", "sha256=0"))
+    calls.clear()
+    cmd.run_map(small_config, tmp_path, progress=False)
+    assert len(calls) == 3
+
+
+def test_cli_writes_outputs_and_missing_dask_is_bad_input(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from hbgear import cli
+    from hbgear.commands import stability_map  # noqa: F401  (registers the command)
+
+    args = ["stability-map", str(EXAMPLE), "--out", str(tmp_path / "o"), "--no-progress"]
+    args += ["--set", "map.speed_steps=5", "--set", "map.contact_ratio_steps=2"]
+    assert cli.main(args) == 0
+    assert {p.name for p in (tmp_path / "o").iterdir()} == {"stability.csv", "stability.png"}
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    assert cli.main(args[:4] + ["--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "install hbgear[distributed]" in capsys.readouterr().err
