@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import fourier
-from .quadrature import fourier_coefficients, mesh_period_rule
+from .quadrature import mesh_period_rule
 
 jax.config.update("jax_enable_x64", True)
 
@@ -68,15 +68,40 @@ class HarmonicBalance:
         return system.excitation_frequency(p) / self.nu
 
     # -- the affine periodic part, exactly ----------------------------------------------------
-    def _periodic_coefficients(self, system, p):
+    def quadrature(self, system, p=1.0):
+        """Nodes and Fourier kernel of the mesh-period rule for this system's breakpoints.
+
+        Computed once per geometry in numpy (the breakpoints depend on the contact ratio and
+        the contact path, not on the parameter) and reused: evaluating ``exp(-2 pi i r s)`` at
+        thousands of nodes would otherwise dominate every residual.
+
+        **Returns:** ``(s, kernel_cos, kernel_sin)``, shapes ``(n,)``, ``(R+1, n)``, ``(R+1, n)``
+        with the weights folded in, ``R = ceil(2H/nu)``.
+        """
+        max_mesh_order = -(-2 * self.harmonics // self.nu)
+        traced = system.breakpoints(p, jnp)
+        if isinstance(traced, jax.core.Tracer):  # called under an outer jit/vmap: build in-trace
+            s, w = mesh_period_rule(traced, max_mesh_order, jnp)
+            phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
+            return s, jnp.cos(phase) * w, jnp.sin(phase) * w
+        breakpoints = tuple(np.round(np.asarray(traced, dtype=float), 15))
+        key = (breakpoints, max_mesh_order)
+        if key not in _QUADRATURE_CACHE:
+            if len(_QUADRATURE_CACHE) > 64:
+                _QUADRATURE_CACHE.clear()
+            s, w = mesh_period_rule(np.asarray(breakpoints), max_mesh_order)
+            phase = 2 * np.pi * np.outer(np.arange(max_mesh_order + 1), s)
+            _QUADRATURE_CACHE[key] = tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
+        return _QUADRATURE_CACHE[key]
+
+    def _periodic_coefficients(self, system, p, quad):
         """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
 
         ``Q_lin`` is affine in ``(q, q')``, so probing it at ``0`` and at unit vectors gives its
         coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes.
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
-        max_mesh_order = -(-2 * H // nu)
-        s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
+        s, kernel_cos, kernel_sin = quad
         eye = jnp.eye(n)
         probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros((n, n))])
         probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros((n, n)), eye])
@@ -86,17 +111,18 @@ class HarmonicBalance:
             return system.force(s, qv[:, None] * ones, vv[:, None] * ones, p, "linear", 0.0, jnp)
 
         values = jax.vmap(force)(probes_q, probes_v)  # (1+2n, n, nodes)
-        coeff = fourier_coefficients(values, s, w, max_mesh_order, jnp)
+        coeff = values @ kernel_cos.T - 1j * (values @ kernel_sin.T)
         coeff = fourier.mesh_to_base(coeff, nu, 2 * H + 1, jnp)  # (1+2n, n, 2H+1)
         forcing = coeff[0]
         stiffness = jnp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
         damping = jnp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
         return forcing, stiffness, damping
 
-    def linear_operator(self, system, p):
+    def linear_operator(self, system, p, quad=None):
         """``(L, F, C_conv)`` in SI: ``L = M D^2 + K_conv + C_conv D``, forcing vector ``F``."""
         H = self.harmonics
-        forcing, stiffness, damping = self._periodic_coefficients(system, p)
+        quad = self.quadrature(system) if quad is None else quad
+        forcing, stiffness, damping = self._periodic_coefficients(system, p, quad)
         k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
         c_conv = fourier.convolution_matrix(damping, H, jnp)
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
@@ -133,25 +159,43 @@ class HarmonicBalance:
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
         return (x.reshape(self.ndof, self.block) @ d.T).reshape(self.size)
 
-    def _residual(self, z, p, system, operator=None):
+    def _residual(self, z, p, system, quad, operator=None):
         x, extra = self._split(system, z)
-        lin, forcing, _ = self.linear_operator(system, p) if operator is None else operator
+        lin, forcing, _ = self.linear_operator(system, p, quad) if operator is None else operator
         r = lin @ x - forcing - self._nonlinear(x, self._velocity(x, system, p), extra, p, system)
         k = system.free_mean_dof
         if k is not None:
             r = r.at[k * self.block].add(extra)
         return r / system.force_scale
 
-    @partial(jax.jit, static_argnums=0)
+    # -- public entry points: the quadrature kernel is fetched outside the traced code ----------
     def residual(self, z, p, system):
         """Scaled residual ``R(z; p)``, shape ``(size,)``."""
-        return self._residual(z, p, system)
+        return self._residual_jit(z, p, system, self.quadrature(system))
 
-    @partial(jax.jit, static_argnums=0)
     def residual_and_jacobian(self, z, p, system):
         """``(R, dR/dz)`` at fixed ``p`` (Newton): the affine part's Jacobian is its operator."""
-        operator = self.linear_operator(system, p)
-        r = self._residual(z, p, system, operator)
+        return self._residual_and_jacobian_jit(z, p, system, self.quadrature(system))
+
+    def residual_and_jacobians(self, z, p, system):
+        """``(R, dR/dz, dR/dp)`` (continuation)."""
+        return self._residual_and_jacobians_jit(z, p, system, self.quadrature(system))
+
+    def hill_matrices(self, z, p, system):
+        """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.
+
+        ``J = dR/dz``, ``D1 = 2 M (x) D + dR/d(velocity)``, ``D2 = M (x) I``.
+        """
+        return self._hill_matrices_jit(z, p, system, self.quadrature(system))
+
+    @partial(jax.jit, static_argnums=0)
+    def _residual_jit(self, z, p, system, quad):
+        return self._residual(z, p, system, quad)
+
+    @partial(jax.jit, static_argnums=0)
+    def _residual_and_jacobian_jit(self, z, p, system, quad):
+        operator = self.linear_operator(system, p, quad)
+        r = self._residual(z, p, system, quad, operator)
         if system.is_linear:
             scale = system.displacement_scale / system.force_scale
             jac = operator[0] * scale
@@ -160,23 +204,20 @@ class HarmonicBalance:
                 slot = k * self.block
                 jac = jac.at[:, slot].set(0.0).at[slot, slot].add(1.0)
             return r, jac
-        return r, jax.jacfwd(self._residual)(z, p, system, operator)
+        return r, jax.jacfwd(self._residual)(z, p, system, quad, operator)
 
     @partial(jax.jit, static_argnums=0)
-    def residual_and_jacobians(self, z, p, system):
-        """``(R, dR/dz, dR/dp)`` (continuation)."""
-        r = self._residual(z, p, system)
-        jz, jp = jax.jacfwd(self._residual, argnums=(0, 1))(z, p, system)
+    def _residual_and_jacobians_jit(self, z, p, system, quad):
+        # dR/dz at a fixed operator, and dR/dp as ONE directional derivative: a joint jacfwd
+        # would push all size+1 tangents through the operator's construction
+        r, jz = self._residual_and_jacobian_jit.__wrapped__(self, z, p, system, quad)
+        _, jp = jax.jvp(lambda pp: self._residual(z, pp, system, quad), (p,), (jnp.ones_like(p),))
         return r, jz, jp
 
     @partial(jax.jit, static_argnums=0)
-    def hill_matrices(self, z, p, system):
-        """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.
-
-        ``J = dR/dz``, ``D1 = 2 M (x) D + dR/d(velocity)``, ``D2 = M (x) I``.
-        """
+    def _hill_matrices_jit(self, z, p, system, quad):
         x, extra = self._split(system, z)
-        lin, _, c_conv = self.linear_operator(system, p)
+        lin, _, c_conv = self.linear_operator(system, p, quad)
         xs, fs = system.displacement_scale, system.force_scale
 
         def response(xx, shift):
@@ -190,3 +231,6 @@ class HarmonicBalance:
         d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
         d1 = (jv + 2 * jnp.kron(mass, d)) * xs
         return jz * xs, d1, d2
+
+
+_QUADRATURE_CACHE: dict = {}
