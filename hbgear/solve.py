@@ -92,6 +92,33 @@ class PeriodicSolution:
         out["dte_p2p_um"] = max(out["dte_p2p_um"], 1e6 * float(np.ptp(dense)))
         return {k: float(v) for k, v in out.items()}
 
+    @classmethod
+    def from_z(cls, model, omega_pinion, z, hb, *, residual_norm=0.0, iterations=0) -> PeriodicSolution:
+        """The solution of scaled unknowns `z` of the discretisation `hb` (reaction slot decoded)."""
+        system = GearSystem(model)
+        z = np.asarray(z, dtype=float)
+        x = z * system.displacement_scale
+        reaction = 0.0
+        if system.free_mean_dof is not None:
+            slot = system.free_mean_dof * hb.block
+            reaction = float(z[slot] * system.force_scale)
+            x = x.copy()
+            x[slot] = 0.0
+        u_static = float(model.static_state(omega_pinion)[1]) if model.boundary == "spring" else 0.0
+        return cls(
+            model=model,
+            omega_pinion=float(omega_pinion),
+            harmonics=hb.harmonics,
+            nu=hb.nu,
+            samples=hb.samples,
+            coefficients=x.reshape(model.ndof, hb.block),
+            reaction_force_N=reaction,
+            u_static_m=u_static,
+            residual_norm=float(residual_norm),
+            iterations=int(iterations),
+            z=z,
+        )
+
     def harmonic_table(self):
         """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
         mean, amp, phase = fourier.harmonic_amplitudes(self.coefficients[0], self.harmonics)
@@ -172,28 +199,7 @@ def solve_periodic(
             f"tried {'; '.join(tried)}; residual {result.residual_norm:.3e} (relative to the static load) "
             f"> tolerance {tolerance:.1e}"
         )
-    z = np.asarray(result.z)
-    x = z * system.displacement_scale
-    reaction = 0.0
-    if system.free_mean_dof is not None:
-        slot = system.free_mean_dof * hb.block
-        reaction = float(z[slot] * system.force_scale)
-        x = x.copy()
-        x[slot] = 0.0
-    u_static = float(model.static_state(omega)[1]) if model.boundary == "spring" else 0.0
-    return PeriodicSolution(
-        model=model,
-        omega_pinion=omega,
-        harmonics=harmonics,
-        nu=nu,
-        samples=samples,
-        coefficients=x.reshape(model.ndof, hb.block),
-        reaction_force_N=reaction,
-        u_static_m=u_static,
-        residual_norm=result.residual_norm,
-        iterations=result.iterations,
-        z=z,
-    )
+    return PeriodicSolution.from_z(model, omega, result.z, hb, residual_norm=result.residual_norm, iterations=result.iterations)
 
 
 def auto_harmonics(

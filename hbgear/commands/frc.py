@@ -12,9 +12,9 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 - `frc.png`: DTE RMS and peak-to-peak against speed, unstable points and folds marked.
 
 ``harmonics = "auto"``: :func:`hbgear.solve.auto_harmonics` at both ends of the sweep, the larger
-``H`` is used for the whole curve. Stability: :func:`hbgear.stability.hill_multipliers` per point
-(stable iff ``max |multiplier| < 1 + 1e-6``); if that module is missing, the Floquet columns are
-NaN and `frc.json` says so. If the continuation stops before the stop speed, the curve computed so
+``H`` is used for the whole curve. Stability: exact monodromy for linear models (batched), Hill's
+method per point otherwise, classified by :func:`hbgear.stability.is_stable`; if that module is
+missing, the Floquet columns are NaN and `frc.json` says so. If the continuation stops before the stop speed, the curve computed so
 far is still written (with the status in `frc.json`) and the run ends with exit status 1.
 """
 
@@ -37,7 +37,7 @@ from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 from ..system import GearSystem
 
-__all__ = ["FRC", "COLUMNS", "run", "solution_from_z", "frc_method", "plot_frc"]
+__all__ = ["FRC", "COLUMNS", "run", "frc_method", "gear_residual_functions", "plot_frc"]
 
 COLUMNS = (
     "speed_rpm",
@@ -51,7 +51,6 @@ COLUMNS = (
     "nu",
     "residual",
 )
-STABILITY_MARGIN = 1e-6  # stable iff max |multiplier| < 1 + STABILITY_MARGIN
 
 
 def add_arguments(parser) -> None:
@@ -59,43 +58,35 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-stability", action="store_true", help="skip the Floquet multipliers (columns NaN)")
 
 
-def solution_from_z(model, omega_pinion, z, hb: HarmonicBalance, *, residual_norm=0.0, iterations=0) -> PeriodicSolution:
-    """The :class:`PeriodicSolution` of scaled unknowns `z` (as at the end of `solve_periodic`)."""
-    system = GearSystem(model)
-    z = np.asarray(z, dtype=float)
-    x = z * system.displacement_scale
-    reaction = 0.0
-    if system.free_mean_dof is not None:
-        slot = system.free_mean_dof * hb.block
-        reaction = float(z[slot] * system.force_scale)
-        x = x.copy()
-        x[slot] = 0.0
-    u_static = float(model.static_state(omega_pinion)[1]) if model.boundary == "spring" else 0.0
-    return PeriodicSolution(
-        model=model,
-        omega_pinion=float(omega_pinion),
-        harmonics=hb.harmonics,
-        nu=hb.nu,
-        samples=hb.samples,
-        coefficients=x.reshape(model.ndof, hb.block),
-        reaction_force_N=reaction,
-        u_static_m=u_static,
-        residual_norm=float(residual_norm),
-        iterations=int(iterations),
-        z=z,
-    )
+def gear_residual_functions(hb: HarmonicBalance, system):
+    """``(residual_and_jacobians, residual)`` in the form :func:`~hbgear.continuation.continuation` takes."""
+
+    def residual_and_jacobians(z, p):
+        return hb.residual_and_jacobians(jnp.asarray(z), p, system)
+
+    def residual(z, p):
+        return hb.residual(jnp.asarray(z), p, system)
+
+    return residual_and_jacobians, residual
 
 
 def frc_method(omega_start, omega_stop, step_rad_s=None) -> PseudoArclength:
-    """Continuation options for a speed sweep: ``p_ref`` = the larger end speed; at least ~50
-    steps over the range on a flat curve; first step `step_rad_s` (``[sweep] step_rpm``) or 1/4
-    of the largest."""
+    """Continuation options for a speed sweep.
+
+    ``p_ref`` = the larger end speed; the unknowns are in static deflections, so a step moves
+    the DTE harmonics by at most 0.25 static deflection (``ds_max``) and the speed by at most
+    1/100 of the range (``max_parameter_step``; at least ~100 points on a flat curve); tangents
+    turn by at most 5 deg per step. First step: `step_rad_s` (``[sweep] step_rpm``) or 1/4 of
+    the largest speed step.
+    """
     scale = max(abs(omega_start), abs(omega_stop))
-    span = abs(omega_stop - omega_start) / scale
-    ds_max = span / 50
-    ds = ds_max / 4 if step_rad_s is None else step_rad_s / scale
-    ds_max = max(ds_max, ds)
-    return PseudoArclength(ds=ds, ds_min=min(1e-7, ds / 10), ds_max=ds_max, parameter_scale=scale)
+    dp_max = abs(omega_stop - omega_start) / scale / 100
+    ds = dp_max / 4 if step_rad_s is None else step_rad_s / scale
+    dp_max = max(dp_max, ds)
+    return PseudoArclength(
+        ds=ds, ds_min=min(1e-7, ds / 10), ds_max=max(0.25, ds), max_angle_deg=5.0,
+        parameter_scale=scale, max_parameter_step=dp_max,
+    )
 
 
 def _harmonics(config, model, omega_start, omega_stop, nu):
@@ -118,21 +109,31 @@ def _harmonics(config, model, omega_start, omega_stop, nu):
     return harmonics, samples, start, text
 
 
-def _stability_function():
-    """``hill_multipliers`` or ``(None, warning)``."""
-    try:
-        from ..stability import hill_multipliers
-    except ImportError as exc:  # not there yet: NaN columns and a warning
-        return None, f"Floquet multipliers not computed: hbgear.stability unavailable ({exc})"
-    return hill_multipliers, None
-
-
 def _floquet(hb, system, branch, progress):
-    """``(max |multiplier| per point, warning)``."""
+    """``(max |multiplier| per point over the base period, stable per point, method, warning)``.
+
+    Linear models: exact monodromy (:func:`hbgear.stability.multipliers_linear`, per mesh period,
+    raised to ``nu``), batched; otherwise Hill's method per point. NaN where unavailable.
+    """
     values = np.full(len(branch), np.nan)
-    function, warning = _stability_function()
-    if function is None:
-        return values, warning
+    stable = np.full(len(branch), np.nan)
+    try:
+        from ..stability import hill_multipliers, is_stable, multipliers_linear
+    except ImportError as exc:  # not there yet: NaN columns and a warning
+        return values, stable, None, f"Floquet multipliers not computed: hbgear.stability unavailable ({exc})"
+    model = system.model
+    if model.is_linear:
+        try:
+            for lo in range(0, len(branch), 256):
+                mult = np.asarray(multipliers_linear(model, np.asarray(branch.p[lo : lo + 256]))) ** hb.nu
+                for k, m in enumerate(mult):
+                    values[lo + k] = float(np.max(np.abs(m))) if m.size else 0.0
+                    stable[lo + k] = float(is_stable(m))
+            return values, stable, "exact monodromy (hbgear.stability.multipliers_linear)", None
+        except Exception as exc:  # noqa: BLE001 -- fall back to Hill
+            fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
+    else:
+        fallback = None
     failures = []
     indices = range(len(branch))
     if progress is not False and (progress or sys.stderr.isatty()):
@@ -144,13 +145,16 @@ def _floquet(hb, system, branch, progress):
             pass
     for i in indices:
         try:
-            multipliers = np.asarray(function(hb, jnp.asarray(branch.z[i]), float(branch.p[i]), system))
+            multipliers = np.asarray(hill_multipliers(hb, jnp.asarray(branch.z[i]), float(branch.p[i]), system))
             values[i] = float(np.max(np.abs(multipliers))) if multipliers.size else 0.0
+            stable[i] = float(is_stable(multipliers))
         except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
             failures.append(f"{rad_s_to_rpm(branch.p[i]):.6g} rpm: {type(exc).__name__}: {exc}")
+    warning = fallback
     if failures:
-        warning = f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}"
-    return values, warning
+        warning = ((fallback + "; ") if fallback else "") + (
+            f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
+    return values, stable, "Hill's method (hbgear.stability.hill_multipliers)", warning
 
 
 def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title):
@@ -189,12 +193,7 @@ def run(config, args, out_dir) -> int:
     hb = HarmonicBalance(model.ndof, harmonics, nu, samples)
     system = GearSystem(model)
 
-    def residual_and_jacobians(z, p):
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system)
-
-    def residual(z, p):
-        return hb.residual(jnp.asarray(z), p, system)
-
+    residual_and_jacobians, residual = gear_residual_functions(hb, system)
     residual_and_jacobians(start.z, omega_start)[0].block_until_ready()  # compile outside the timing
     residual(start.z, omega_start).block_until_ready()
     t_compile = clock()
@@ -208,14 +207,17 @@ def run(config, args, out_dir) -> int:
     t_cont = clock()
 
     if getattr(args, "no_stability", False):
-        floquet, stability_warning = np.full(len(branch), np.nan), "Floquet multipliers skipped (--no-stability)"
+        floquet, stable = np.full(len(branch), np.nan), np.full(len(branch), np.nan)
+        stability_method, stability_warning = None, "Floquet multipliers skipped (--no-stability)"
     else:
-        floquet, stability_warning = _floquet(hb, system, branch, progress)
-    stable = np.where(np.isnan(floquet), np.nan, (floquet < 1.0 + STABILITY_MARGIN).astype(float))
+        floquet, stable, stability_method, stability_warning = _floquet(hb, system, branch, progress)
     t_stab = clock()
 
     speed_rpm = rad_s_to_rpm(np.asarray(branch.p))
-    summaries = [solution_from_z(model, p, z, hb, residual_norm=r, iterations=it).summary()
+    speed_rpm[0] = sw.speed_rpm_start  # exact ends (no rpm -> rad/s -> rpm rounding)
+    if branch.success:
+        speed_rpm[-1] = sw.speed_rpm_stop
+    summaries = [PeriodicSolution.from_z(model, p, z, hb, residual_norm=r, iterations=it).summary()
                  for p, z, r, it in zip(branch.p, branch.z, branch.residual, branch.iterations)]
     table = np.column_stack([
         speed_rpm,
@@ -271,9 +273,11 @@ def run(config, args, out_dir) -> int:
         "peak": {"speed_rpm": float(speed_rpm[peak]), "dte_p2p_um": float(table[peak, 4]),
                  "dte_rms_um": float(table[peak, 3])},
         "stability": {
-            "available": stability_warning is None,
+            "available": bool(np.all(np.isfinite(floquet))),
+            "method": stability_method,
             "warning": stability_warning,
-            "criterion": f"stable iff max |Floquet multiplier| < 1 + {STABILITY_MARGIN:g} (Hill's method)",
+            "criterion": "hbgear.stability.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
+            "max_abs_floquet is over the base period (nu mesh periods)",
             "unstable_points": int(np.sum(stable == 0)),
         },
         "continuation": asdict(method) | {"method": "pseudo-arclength", "parameter": "pinion speed [rad/s]"},

@@ -1,0 +1,491 @@
+r"""Pseudo-arclength continuation of a solution branch ``R(z; p) = 0`` (any residual).
+
+The branch is followed in the scaled unknowns ``y = (z, p / p_ref)`` so that one arclength step
+mixes comparable magnitudes (the harmonic-balance ``z`` are already scaled by the static
+deflection; ``p_ref`` defaults to ``max(|p0|, |p_end|)``). Each step:
+
+1. **Tangent** ``t``: the unit null vector of ``[R_z, R_p p_ref]``, from the bordered system
+   ``[[R_z, R_p p_ref], [t_prev^T]] t = [0, 1]`` -- which keeps the orientation
+   (``t . t_prev > 0``), so the branch is followed through folds.
+2. **Predictor** ``y_pred = y + ds t``.
+3. **Corrector**: Newton on ``R(y) = 0``, ``t . (y - y_pred) = 0`` (the hyperplane orthogonal to
+   the tangent), with a backtracking line search on ``max |R|``; converged when
+   ``max |R| <= tolerance``.
+4. **Acceptance**: the corrector converged within ``max_corrector_iterations``, moved less than
+   ``ds`` off the predictor, and the new tangent turned by at most ``max_angle_deg``; otherwise
+   ``ds`` is halved and the step retried. Below ``ds_min`` the run stops with
+   :attr:`Status.STEP_TOO_SMALL` and a message saying where, what was tried and the residual.
+5. **Step size**: ``ds *= clip(min(target_iterations / iterations, max_angle / (2 angle)), 1/2, 2)``,
+   kept in ``[ds_min, ds_max]`` and, optionally, so that the predicted change of ``p/p_ref`` is
+   at most ``max_parameter_step``.
+
+A **fold** (turning point in ``p``) is where the ``p``-component of the tangent changes sign; it
+is located by Illinois regula falsi on that component along the arc and inserted into the
+branch as a converged point of kind :attr:`PointKind.FOLD`. The run stops exactly at ``p_end``
+(the last point is solved at ``p = p_end``), at ``max_points``, or when the branch turns back
+past ``p0``. Only converged points are ever stored: no silent gaps.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
+
+import numpy as np
+import scipy.linalg
+
+from .newton import newton
+
+__all__ = ["PseudoArclength", "continuation", "Branch", "Status", "PointKind"]
+
+
+class Status(enum.IntEnum):
+    """Overall outcome of a continuation run (see :data:`MESSAGES`)."""
+
+    SUCCESS = 0  # reached p_end
+    MAX_POINTS = 1  # max_points reached before p_end
+    STEP_TOO_SMALL = 2  # no acceptable step with ds >= ds_min
+    START_FAILED = 3  # Newton at p0 did not converge
+    TURNED_BACK = 4  # the branch went back past p0
+    STOPPED = 5  # the callback asked to stop
+
+
+MESSAGES = {
+    Status.SUCCESS: "reached the end of the parameter range",
+    Status.MAX_POINTS: "stopped at max_points before the end of the range; raise max_points or ds_max",
+    Status.STEP_TOO_SMALL: "no acceptable continuation step above ds_min; try more harmonics, a smaller "
+    "ds_min, more corrector iterations or a smoother model",
+    Status.START_FAILED: "the starting point did not converge; give a better z0",
+    Status.TURNED_BACK: "the branch turned back past the start of the range (an isola or a branch that "
+    "does not reach p_end)",
+    Status.STOPPED: "stopped by the callback",
+}
+
+
+class PointKind(enum.IntEnum):
+    """What a stored branch point is."""
+
+    START = 0
+    REGULAR = 1
+    FOLD = 2  # located turning point (p-component of the tangent ~ 0)
+    END = 3  # solved exactly at p_end
+
+
+@dataclass(frozen=True)
+class PseudoArclength:
+    """Options of pseudo-arclength continuation (all step sizes in scaled units).
+
+    **Arguments:**
+
+    - `ds`: initial arclength step in ``(z, p/p_ref)`` [-]; `ds_min`, `ds_max`: its bounds.
+    - `max_corrector_iterations`: Newton iterations allowed per step.
+    - `target_iterations`: the corrector iterations the step-size control aims at.
+    - `max_angle_deg`: largest angle between successive tangents [deg].
+    - `parameter_scale`: ``p_ref`` [units of p]; ``None`` = ``max(|p0|, |p_end|)``.
+    - `growth`: largest factor by which ``ds`` grows after a step (it shrinks by at most 2).
+    - `max_parameter_step`: largest predicted change of ``p/p_ref`` per step [-] (``None``: no
+      limit) -- the resolution in ``p`` where the branch is flat while ``ds_max`` is sized for
+      the unknowns.
+    """
+
+    ds: float = 1e-2
+    ds_min: float = 1e-7
+    ds_max: float = 5e-2
+    max_corrector_iterations: int = 10
+    target_iterations: int = 4
+    max_angle_deg: float = 10.0
+    parameter_scale: float | None = None
+    growth: float = 2.0
+    max_parameter_step: float | None = None
+
+    def __post_init__(self):
+        if not (0 < self.ds_min <= self.ds <= self.ds_max and math.isfinite(self.ds_max)):
+            raise ValueError(f"need 0 < ds_min <= ds <= ds_max < inf, got {self.ds_min}, {self.ds}, {self.ds_max}")
+        if not 1 <= self.target_iterations <= self.max_corrector_iterations:
+            raise ValueError("need 1 <= target_iterations <= max_corrector_iterations")
+        if not 0 < self.max_angle_deg < 90:
+            raise ValueError(f"max_angle_deg must be in (0, 90), got {self.max_angle_deg}")
+        if self.parameter_scale is not None and not (self.parameter_scale > 0 and math.isfinite(self.parameter_scale)):
+            raise ValueError(f"parameter_scale must be a positive finite number, got {self.parameter_scale}")
+        if not self.growth > 1:
+            raise ValueError("growth must be > 1")
+        if self.max_parameter_step is not None and not self.max_parameter_step > 0:
+            raise ValueError(f"max_parameter_step must be > 0, got {self.max_parameter_step}")
+
+
+@dataclass(frozen=True)
+class Branch:
+    """A continued branch: an immutable struct of arrays, points in path order.
+
+    **Fields:** `p` (n,) parameter; `z` (n, size) unknowns; `kind` (n,) :class:`PointKind`;
+    `iterations` (n,) corrector iterations; `residual` (n,) ``max |R|``; `tangent_p` (n,)
+    ``p``-component of the unit tangent in scaled units (its sign is the direction of travel in
+    ``p``; it changes sign at folds); `ds` (n,) arclength step that reached the point;
+    `status` :class:`Status`; `message`; `parameter_scale` ``p_ref``; `rejected` steps refused.
+    """
+
+    p: np.ndarray
+    z: np.ndarray
+    kind: np.ndarray
+    iterations: np.ndarray
+    residual: np.ndarray
+    tangent_p: np.ndarray
+    ds: np.ndarray
+    status: Status
+    message: str
+    parameter_scale: float
+    rejected: int = 0
+
+    def __post_init__(self):
+        for name in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds"):
+            value = np.array(getattr(self, name))
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+
+    def __len__(self) -> int:
+        return len(self.p)
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.SUCCESS
+
+    @property
+    def folds(self) -> np.ndarray:
+        """Indices of the located fold points."""
+        return np.flatnonzero(self.kind == PointKind.FOLD)
+
+    @property
+    def fold_p(self) -> np.ndarray:
+        return self.p[self.folds]
+
+
+class _Point(NamedTuple):
+    y: np.ndarray  # (z, p/p_ref)
+    r_norm: float
+    jac: np.ndarray  # [R_z, R_p p_ref], (size, size+1)
+    iterations: int
+
+
+class _Failure(NamedTuple):
+    reason: str
+    r_norm: float
+    iterations: int
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _tangent(jac, previous):
+    """Unit null vector of ``jac`` with ``t . previous > 0``."""
+    n = jac.shape[0]
+    a = np.vstack([jac, previous[None, :]])
+    b = np.zeros(n + 1)
+    b[-1] = 1.0
+    try:
+        t = scipy.linalg.solve(a, b, check_finite=False)
+    except (np.linalg.LinAlgError, ValueError):
+        t = np.full(n + 1, np.nan)
+    if not np.all(np.isfinite(t)):  # degenerate border: fall back to the SVD null vector
+        t = np.linalg.svd(jac)[2][-1]
+    t = _unit(t)
+    return t if t @ previous >= 0 else -t
+
+
+def _angle_deg(a, b):
+    return math.degrees(math.acos(min(1.0, max(-1.0, float(a @ b)))))
+
+
+def continuation(
+    residual_and_jacobians: Callable,
+    residual: Callable,
+    z0,
+    p0: float,
+    p_end: float,
+    method: PseudoArclength = PseudoArclength(),
+    *,
+    max_points: int = 1000,
+    tolerance: float = 1e-9,
+    callback: Callable | None = None,
+    progress: bool | None = None,
+    start_iterations: int = 50,
+) -> Branch:
+    r"""Follow the branch of ``R(z; p) = 0`` from ``(z0, p0)`` towards ``p_end``.
+
+    **Arguments:**
+
+    - `residual_and_jacobians`: ``(z, p) -> (R, dR/dz, dR/dp)``, shapes ``(m,)``, ``(m, m)``, ``(m,)``.
+    - `residual`: ``(z, p) -> R`` (line search).
+    - `z0`: starting guess at `p0` (corrected by Newton at fixed ``p0`` first); `p_end`: where to
+      stop (either side of `p0`).
+    - `method`: :class:`PseudoArclength` options.
+    - `max_points`: stored points at most (start, folds and end included); `tolerance`: on
+      ``max |R|``.
+    - `callback(p, z)`: called for every stored point in path order; returning ``True`` stops
+      the run (:attr:`Status.STOPPED`).
+    - `progress`: a tqdm bar on stderr; ``None`` = only when stderr is a terminal.
+    - `start_iterations`: Newton iterations for the starting point.
+
+    **Returns:** a :class:`Branch`; failures are its `status` and `message`, never exceptions.
+    """
+    if p_end == p0:
+        raise ValueError("p_end must differ from p0")
+    if max_points < 2:
+        raise ValueError("max_points must be >= 2")
+    m = method
+    scale = float(m.parameter_scale or max(abs(p0), abs(p_end)))
+    direction = 1.0 if p_end > p0 else -1.0
+    z0 = np.asarray(z0, dtype=float)
+    size = z0.size
+
+    def evaluate(y):
+        r, jz, jp = residual_and_jacobians(y[:-1], float(y[-1] * scale))
+        r = np.asarray(r, dtype=float)
+        jac = np.hstack([np.asarray(jz, dtype=float), scale * np.asarray(jp, dtype=float).reshape(-1, 1)])
+        return r, jac
+
+    def norm_of(y):
+        return float(np.max(np.abs(np.asarray(residual(y[:-1], float(y[-1] * scale))))))
+
+    def correct(y_pred, row, target, max_iter):
+        """Newton on ``R(y) = 0``, ``row . y = target``; returns a _Point or a _Failure."""
+        y = y_pred.copy()
+        r, jac = evaluate(y)
+        norm = float(np.max(np.abs(r)))
+        for it in range(max_iter + 1):
+            if not np.isfinite(norm):
+                return _Failure("non-finite residual", norm, it)
+            if norm <= tolerance and abs(row @ y - target) <= 1e-12 * (1 + abs(target)):
+                return _Point(y, norm, jac, it)
+            if it == max_iter:
+                break
+            a = np.vstack([jac, row[None, :]])
+            b = -np.append(r, row @ y - target)
+            try:
+                step = scipy.linalg.lu_solve(scipy.linalg.lu_factor(a, check_finite=False), b, check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                return _Failure("singular bordered Jacobian", norm, it)
+            if not np.all(np.isfinite(step)):
+                return _Failure("singular bordered Jacobian", norm, it)
+            trial = y + step
+            r_trial, jac_trial = evaluate(trial)
+            trial_norm = float(np.max(np.abs(r_trial)))
+            if not (np.isfinite(trial_norm) and trial_norm < (1 - 1e-4) * norm):
+                alpha = 1.0  # backtracking on max|R| (the linear constraint stays satisfied)
+                while alpha > 1 / 8:
+                    alpha *= 0.5
+                    trial = y + alpha * step
+                    trial_norm = norm_of(trial)
+                    if np.isfinite(trial_norm) and trial_norm < (1 - 1e-4 * alpha) * norm:
+                        break
+                r_trial, jac_trial = evaluate(trial)
+                trial_norm = float(np.max(np.abs(r_trial)))
+            y, r, jac, norm = trial, r_trial, jac_trial, trial_norm
+        return _Failure(f"not converged in {max_iter} corrector iterations", norm, max_iter)
+
+    # -- storage -----------------------------------------------------------------------------
+    rows = {k: [] for k in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds")}
+    stopped = [False]
+
+    def store(y, kind, iterations, r_norm, t, ds, p=None):
+        rows["p"].append(y[-1] * scale if p is None else p)
+        rows["z"].append(y[:-1].copy())
+        rows["kind"].append(int(kind))
+        rows["iterations"].append(iterations)
+        rows["residual"].append(r_norm)
+        rows["tangent_p"].append(float(t[-1]))
+        rows["ds"].append(ds)
+        if callback is not None and callback(float(rows["p"][-1]), y[:-1].copy()):
+            stopped[0] = True
+
+    rejected = 0
+
+    def finish(status, detail=""):
+        message = MESSAGES[status] if not detail else f"{detail}. {MESSAGES[status]}"
+        empty = np.zeros((0, size))
+        return Branch(
+            p=np.asarray(rows["p"], dtype=float),
+            z=np.asarray(rows["z"], dtype=float) if rows["z"] else empty,
+            kind=np.asarray(rows["kind"], dtype=np.int8),
+            iterations=np.asarray(rows["iterations"], dtype=int),
+            residual=np.asarray(rows["residual"], dtype=float),
+            tangent_p=np.asarray(rows["tangent_p"], dtype=float),
+            ds=np.asarray(rows["ds"], dtype=float),
+            status=status,
+            message=message,
+            parameter_scale=scale,
+            rejected=rejected,
+        )
+
+    # -- start -------------------------------------------------------------------------------
+    start = newton(
+        lambda z: residual_and_jacobians(z, float(p0))[:2],
+        lambda z: residual(z, float(p0)),
+        z0,
+        tolerance=tolerance,
+        max_iterations=start_iterations,
+    )
+    if not start.converged:
+        return finish(
+            Status.START_FAILED,
+            f"Newton at p = {p0:.9g} reached max|R| = {start.residual_norm:.3e} > tolerance {tolerance:.1e} "
+            f"after {start.iterations} iterations",
+        )
+    y = np.append(np.asarray(start.z, dtype=float), p0 / scale)
+    r, jac = evaluate(y)
+    seed = np.zeros(size + 1)
+    seed[-1] = direction
+    t = _tangent(jac, seed)
+    if t[-1] * direction <= 0:  # started on a fold or against the range: push towards p_end
+        t = -t if t[-1] * direction < 0 else t
+    store(y, PointKind.START, start.iterations, float(np.max(np.abs(r))), t, 0.0, p=float(p0))
+
+    bar = _progress_bar(progress, p0, p_end)
+    ds = m.ds
+    end_scaled = p_end / scale
+    detail = ""
+    status = None
+    try:
+        while status is None:
+            if stopped[0]:
+                status = Status.STOPPED
+                break
+            if len(rows["p"]) >= max_points:
+                status = Status.MAX_POINTS
+                detail = f"{max_points} points stored, last at p = {y[-1] * scale:.9g}"
+                break
+            tried = []
+            if m.max_parameter_step is not None and abs(t[-1]) * ds > m.max_parameter_step:
+                ds = max(m.ds_min, m.max_parameter_step / abs(t[-1]))
+            while True:
+                y_pred = y + ds * t
+                result = correct(y_pred, t, t @ y_pred, m.max_corrector_iterations)
+                if isinstance(result, _Point):
+                    t_new = _tangent(result.jac, t)
+                    angle = _angle_deg(t_new, t)
+                    offset = float(np.linalg.norm(result.y - y_pred))
+                    if offset > ds and ds > m.ds_min:
+                        result = _Failure(f"corrector moved {offset:.2e} > ds off the predictor", result.r_norm, result.iterations)
+                    elif angle > m.max_angle_deg and ds > m.ds_min:
+                        result = _Failure(f"tangent turned {angle:.1f} deg > {m.max_angle_deg:g}", result.r_norm, result.iterations)
+                if isinstance(result, _Point):
+                    break
+                tried.append((ds, f"ds={ds:.3g}: {result.reason} (max|R|={result.r_norm:.2e})"))
+                rejected += 1
+                if ds <= m.ds_min:
+                    status = Status.STEP_TOO_SMALL
+                    detail = (
+                        f"stuck at p = {y[-1] * scale:.9g} (tangent p-component {t[-1]:+.3g}, "
+                        f"max|R| = {float(rows['residual'][-1]):.2e} there): {len(tried)} step sizes tried "
+                        f"from ds = {float(tried[0][0]):.3g} down to ds_min = {m.ds_min:.3g}, the last: "
+                        + "; ".join(text for _, text in tried[-3:])
+                    )
+                    break
+                ds = max(m.ds_min, 0.5 * ds)
+            if status is not None:
+                break
+            y_new, point = result.y, result
+
+            # fold: the p-component of the tangent changed sign
+            if t_new[-1] * t[-1] < 0:
+                fold = _locate_fold(correct, y, t, y_new, float(t_new[-1]), m.max_corrector_iterations)
+                if fold is not None and (fold.y[-1] - end_scaled) * direction < 0:
+                    t_fold = _tangent(fold.jac, t)
+                    store(fold.y, PointKind.FOLD, fold.iterations, fold.r_norm, t_fold, float(t @ (fold.y - y)))
+                    if len(rows["p"]) >= max_points:
+                        y, t = fold.y, t_fold
+                        continue
+
+            # end of the range: crossed p_end -> solve exactly there
+            if (y_new[-1] - end_scaled) * direction >= 0:
+                frac = (end_scaled - y[-1]) / (y_new[-1] - y[-1])
+                guess = y + frac * (y_new - y)
+                row = np.zeros(size + 1)
+                row[-1] = 1.0
+                last = correct(guess, row, end_scaled, m.max_corrector_iterations)
+                if isinstance(last, _Point):
+                    t_last = _tangent(last.jac, t)
+                    store(last.y, PointKind.END, last.iterations, last.r_norm, t_last, float(np.linalg.norm(last.y - y)), p=float(p_end))
+                    status = Status.SUCCESS
+                    y = last.y
+                    break
+                ds = max(m.ds_min, 0.5 * ds)  # come closer first
+                if ds > m.ds_min:
+                    continue
+                status = Status.STEP_TOO_SMALL
+                detail = f"could not solve at p_end = {p_end:.9g}: {last.reason} (max|R|={last.r_norm:.2e})"
+                break
+            # went back past the start
+            if (y_new[-1] - p0 / scale) * direction < 0 and (y[-1] - p0 / scale) * direction >= 0 and len(rows["p"]) > 1:
+                store(y_new, PointKind.REGULAR, point.iterations, point.r_norm, t_new, ds)
+                status = Status.TURNED_BACK
+                detail = f"at p = {y_new[-1] * scale:.9g}"
+                break
+
+            store(y_new, PointKind.REGULAR, point.iterations, point.r_norm, t_new, ds)
+            angle = _angle_deg(t_new, t)
+            factor = m.target_iterations / max(point.iterations, 1)
+            if angle > 0:
+                factor = min(factor, m.max_angle_deg / (2 * angle))
+            ds = min(m.ds_max, max(m.ds_min, ds * min(m.growth, max(0.5, factor))))
+            y, t = y_new, t_new
+            if bar is not None:
+                bar.n = round(100 * min(1.0, max(0.0, (y[-1] * scale - p0) / (p_end - p0))), 1)
+                bar.set_postfix(p=f"{y[-1] * scale:.6g}", points=len(rows["p"]), ds=f"{ds:.2g}", refresh=False)
+                bar.refresh()
+    finally:
+        if bar is not None:
+            bar.close()
+    return finish(status, detail)
+
+
+def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
+    """The turning point between two converged points: zero of the tangent's p-component along
+    the arc, parametrised by ``s = t0 . (y - y0)``, by Illinois regula falsi."""
+    h = float(t0 @ (y1 - y0))
+
+    def at(s):
+        point = correct(y0 + s * t0, t0, float(t0 @ y0) + s, max_iter)
+        if not isinstance(point, _Point):
+            return None, None
+        return point, _tangent(point.jac, t0)[-1]
+
+    s_lo, g_lo = 0.0, float(t0[-1])
+    s_hi, g_hi = h, g1
+    best = None
+    side = 0
+    for _ in range(max_steps):
+        s = (s_lo * g_hi - s_hi * g_lo) / (g_hi - g_lo)
+        point, g = at(s)
+        if point is None:
+            return best
+        best = point
+        if abs(g) < 1e-12 or abs(s_hi - s_lo) < 1e-13 * max(abs(h), 1e-300):
+            return point
+        if g * g_lo > 0:
+            s_lo, g_lo = s, g
+            if side == -1:
+                g_hi *= 0.5
+            side = -1
+        else:
+            s_hi, g_hi = s, g
+            if side == 1:
+                g_lo *= 0.5
+            side = 1
+    return best
+
+
+def _progress_bar(progress, p0, p_end):
+    if progress is False:
+        return None
+    if progress is None and not (hasattr(sys.stderr, "isatty") and sys.stderr.isatty()):
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=100, desc=f"continuation {p0:.6g} -> {p_end:.6g}", unit="%", leave=False, file=sys.stderr,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]")

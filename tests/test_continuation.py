@@ -1,0 +1,249 @@
+"""hbgear.continuation: pseudo-arclength continuation, folds, landing, statuses; `hbgear frc`.
+
+Known answers: the Duffing oscillator ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos wt`` (its H=1
+jump frequencies from the discriminant of the amplitude--frequency cubic, its backbone), a
+linear oscillator (direct solves, closed form), and the reference gear pair (LTV, torques)
+over its primary resonance against independent ``solve_periodic`` calls.
+"""
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from hbgear import build_model, load_config
+from hbgear.continuation import Branch, PointKind, PseudoArclength, Status, continuation
+from hbgear.hb import HarmonicBalance
+from hbgear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.system import Duffing, GearSystem
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
+C, K, A, F = 0.02, 1.0, 0.1, 0.05
+DUFFING = Duffing(damping=C, stiffness=K, cubic=A, forcing=F)
+HB1 = HarmonicBalance(1, 1, 1, 16)
+HB7 = HarmonicBalance(1, 7, 1, 64)
+GEAR_OVERRIDES = ["boundary.output='torques'", "friction.model='LTV'", "solver.harmonics=8", "solver.time_samples=64"]
+HB_GEAR = HarmonicBalance(1, 8, 1, 64)
+
+
+def problem(hb, system):
+    def rj(z, p):
+        return hb.residual_and_jacobians(jnp.asarray(z), p, system)
+
+    def r(z, p):
+        return hb.residual(jnp.asarray(z), p, system)
+
+    return rj, r
+
+
+def analytic_folds(c=C, k=K, a=A, f=F, lo=0.5, hi=2.0):
+    """Jump frequencies of the H=1 relation ``((k - w^2 + 3/4 a A^2)^2 + (c w)^2) A^2 = f^2``:
+    where the cubic in ``u = A^2`` has a double root (zero discriminant)."""
+    b = 0.75 * a
+
+    def disc(w):
+        d = k - w * w
+        c3, c2, c1, c0 = b * b, 2 * d * b, d * d + c * c * w * w, -f * f
+        return 18 * c3 * c2 * c1 * c0 - 4 * c2**3 * c0 + c2**2 * c1**2 - 4 * c3 * c1**3 - 27 * c3**2 * c0**2
+
+    w = np.linspace(lo, hi, 3001)
+    sign = np.sign(disc(w))
+    return sorted(brentq(disc, w[i], w[i + 1], xtol=1e-15, rtol=1e-15) for i in np.flatnonzero(np.diff(sign)))
+
+
+def fundamental(branch):
+    return np.hypot(branch.z[:, 1], branch.z[:, 2])
+
+
+@pytest.fixture(scope="module")
+def duffing_h1():
+    return continuation(*problem(HB1, DUFFING), np.zeros(HB1.size), 0.5, 2.0, PseudoArclength(), tolerance=1e-12, max_points=2000)
+
+
+@pytest.fixture(scope="module")
+def duffing_h7():
+    return continuation(*problem(HB7, DUFFING), np.zeros(HB7.size), 0.5, 2.0, PseudoArclength(), tolerance=1e-10, max_points=2000)
+
+
+# ---------------------------------------------------------------------------- (a) Duffing
+
+
+def test_duffing_passes_both_folds(duffing_h1, duffing_h7):
+    for branch in (duffing_h1, duffing_h7):
+        assert branch.status == Status.SUCCESS, branch.message
+        assert branch.p[0] == 0.5 and branch.p[-1] == 2.0  # lands exactly on p_end
+        assert branch.kind[0] == PointKind.START and branch.kind[-1] == PointKind.END
+        assert len(branch.folds) == 2
+        steps = np.diff(branch.p)
+        assert np.any(steps < 0)  # the path goes back in w between the folds
+        # the tangent's p-component is + before the first fold, - between, + after
+        f1, f2 = branch.folds
+        assert np.all(branch.tangent_p[:f1] > 0) and np.all(branch.tangent_p[f1 + 1 : f2] < 0)
+        assert np.all(branch.tangent_p[f2 + 1 :] > 0)
+        assert np.all(np.abs(branch.tangent_p[branch.folds]) < 1e-8)
+
+
+def test_duffing_fold_frequencies_match_analytic(duffing_h1, duffing_h7):
+    low, high = analytic_folds()
+    assert 1.0 < low < high < 1.3
+    upper, lower = duffing_h1.fold_p  # path order: the upper (jump-down) fold comes first
+    assert upper == pytest.approx(high, rel=1e-6)
+    assert lower == pytest.approx(low, rel=1e-6)
+    upper7, lower7 = duffing_h7.fold_p
+    assert upper7 == pytest.approx(high, rel=1e-2)
+    assert lower7 == pytest.approx(low, rel=1e-2)
+    assert np.max(duffing_h1.residual) <= 1e-12 and np.max(duffing_h7.residual) <= 1e-10
+
+
+def test_duffing_peak_on_backbone(duffing_h1, duffing_h7):
+    for branch in (duffing_h1, duffing_h7):
+        amp = fundamental(branch)
+        i = int(np.argmax(amp))
+        backbone = math.sqrt(K + 0.75 * A * amp[i] ** 2)
+        assert branch.p[i] == pytest.approx(backbone, rel=1e-2)
+        # the peak lies between the two folds on the upper branch, amplitude ~ f / (c w)
+        assert amp[i] == pytest.approx(F / (C * branch.p[i]), rel=2e-2)
+
+
+def test_reverse_direction_finds_the_same_folds(duffing_h1):
+    back = continuation(*problem(HB1, DUFFING), np.zeros(HB1.size), 2.0, 0.5, PseudoArclength(), tolerance=1e-12, max_points=2000)
+    assert back.status == Status.SUCCESS and back.p[-1] == 0.5
+    assert np.sort(back.fold_p) == pytest.approx(np.sort(duffing_h1.fold_p), rel=1e-9)
+
+
+# ---------------------------------------------------------------------------- (b) linear
+
+
+def test_linear_oscillator_matches_direct_solves():
+    linear = Duffing(damping=C, stiffness=K, cubic=0.0, forcing=F)
+    rj, r = problem(HB7, linear)
+    branch = continuation(rj, r, np.zeros(HB7.size), 0.5, 2.0, PseudoArclength(), tolerance=1e-12, max_points=2000)
+    assert branch.status == Status.SUCCESS and len(branch.folds) == 0
+    assert np.all(np.diff(branch.p) > 0)
+    for p, z in zip(branch.p[::7], branch.z[::7]):
+        r0, jz, _ = rj(np.zeros(HB7.size), float(p))
+        direct = np.linalg.solve(np.asarray(jz), -np.asarray(r0))
+        assert np.max(np.abs(z - direct)) <= 1e-10
+    amp = fundamental(branch)
+    closed = F / np.hypot(K - branch.p**2, C * branch.p)
+    assert np.max(np.abs(amp - closed) / closed) < 1e-10
+    assert np.max(np.abs(branch.z[:, 3:])) < 1e-12  # no higher harmonics
+
+
+# ---------------------------------------------------------------------------- generic behaviour
+
+
+def test_circle_fold_and_turning_back():
+    """``z^2 + p^2 = 1`` from p = 0 towards 2: fold at p = 1, then the branch turns back past 0."""
+
+    def rj(z, p):
+        return np.array([z[0] ** 2 + p**2 - 1]), np.array([[2 * z[0]]]), np.array([2 * p])
+
+    def r(z, p):
+        return np.array([z[0] ** 2 + p**2 - 1])
+
+    branch = continuation(rj, r, [0.9], 0.0, 2.0, PseudoArclength(ds=0.05, ds_max=0.1, parameter_scale=1.0), tolerance=1e-13)
+    assert branch.status == Status.TURNED_BACK
+    assert "turned back" in branch.message
+    assert branch.fold_p == pytest.approx([1.0], abs=1e-12)
+    assert branch.p[-1] < 0
+    assert np.all(np.abs(branch.z[:, 0] ** 2 + branch.p**2 - 1) <= 1e-13)
+
+
+def test_failure_is_a_status_with_a_message():
+    def rj(z, p):
+        bad = np.nan if p > 1.0 else 0.0
+        return np.array([z[0] - p + bad]), np.eye(1), np.array([-1.0])
+
+    def r(z, p):
+        return rj(z, p)[0]
+
+    branch = continuation(rj, r, [0.0], 0.0, 2.0, PseudoArclength(ds=0.1, ds_min=1e-6, ds_max=0.2, parameter_scale=1.0))
+    assert branch.status == Status.STEP_TOO_SMALL and not branch.success
+    assert "stuck at p = 1" in branch.message and "non-finite" in branch.message
+    assert branch.p[-1] <= 1.0 and branch.p[-1] > 1.0 - 1e-5  # no silent gap: it got as close as ds_min allows
+    assert np.all(np.isfinite(branch.residual))
+
+    capped = continuation(rj, r, [0.0], 0.0, 0.9, PseudoArclength(ds=0.01, ds_max=0.01, parameter_scale=1.0), max_points=5)
+    assert capped.status == Status.MAX_POINTS and len(capped) == 5
+
+    stopped = continuation(rj, r, [0.0], 0.0, 0.9, PseudoArclength(parameter_scale=1.0), callback=lambda p, z: p > 0.3)
+    assert stopped.status == Status.STOPPED and 0.3 < stopped.p[-1] < 0.9
+
+
+def test_options_and_branch_are_checked_and_immutable(duffing_h1):
+    with pytest.raises(ValueError):
+        PseudoArclength(ds=1.0, ds_max=0.1)
+    with pytest.raises(ValueError):
+        PseudoArclength(target_iterations=20, max_corrector_iterations=10)
+    with pytest.raises(ValueError):
+        PseudoArclength(max_angle_deg=120)
+    assert isinstance(duffing_h1, Branch)
+    with pytest.raises(ValueError):
+        duffing_h1.p[0] = 1.0
+    n = len(duffing_h1)
+    assert duffing_h1.z.shape == (n, HB1.size)
+    for name in ("kind", "iterations", "residual", "tangent_p", "ds"):
+        assert getattr(duffing_h1, name).shape == (n,)
+
+
+# ---------------------------------------------------------------------------- (c) gear pair
+
+
+@pytest.fixture(scope="module")
+def gear():
+    cfg = load_config(EXAMPLE, GEAR_OVERRIDES)
+    model = build_model(cfg)
+    assert model.is_linear and model.ndof == 1
+    w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
+    start = solve_periodic(model, w0, harmonics=8, samples=64, tolerance=1e-12)
+    from hbgear.commands.frc import frc_method, gear_residual_functions
+
+    rj, r = gear_residual_functions(HB_GEAR, GearSystem(model))
+    branch = continuation(rj, r, start.z, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000)
+    return model, branch
+
+
+def test_gear_primary_resonance_matches_solve_periodic(gear):
+    model, branch = gear
+    assert branch.status == Status.SUCCESS, branch.message
+    assert np.max(branch.residual) <= 1e-12
+    assert len(branch.folds) == 0 and np.all(np.diff(branch.p) > 0)  # LTV: linear, no folds
+    amp = fundamental(branch)
+    peak = int(np.argmax(amp))
+    assert 12500 < branch.p[peak] * 30 / np.pi < 14500  # the primary resonance is inside
+    for i in sorted({1, peak - 3, peak, peak + 5, len(branch) // 2, len(branch) - 1}):
+        reference = solve_periodic(model, float(branch.p[i]), harmonics=8, samples=64, tolerance=1e-12)
+        scale = np.max(np.abs(reference.z))
+        assert np.max(np.abs(branch.z[i] - reference.z)) <= 1e-8 * scale
+
+
+def test_frc_command_writes_the_curve(tmp_path, gear):
+    from hbgear import cli
+
+    out = tmp_path / "frc"
+    args = ["frc", str(EXAMPLE), "--out", str(out), "--no-progress"]
+    for item in GEAR_OVERRIDES + ["sweep.speed_rpm_start=15000", "sweep.speed_rpm_stop=12000"]:
+        args += ["--set", item]
+    assert cli.main(args) == 0
+    with open(out / "frc.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["speed_rpm", "mesh_freq_hz", "dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor",
+                       "max_abs_floquet", "stable", "nu", "residual"]
+    data = np.array(rows[1:], dtype=float)
+    assert data[0, 0] == pytest.approx(15000.0, rel=1e-14) and data[-1, 0] == pytest.approx(12000.0, rel=1e-14)
+    assert np.all(np.diff(data[:, 0]) < 0)
+    assert data[:, 1] == pytest.approx(data[:, 0] / 60 * 25, rel=1e-12)
+    assert np.all(data[:, 9] <= 1e-9) and np.all(data[:, 8] == 1)
+    summary = json.loads((out / "frc.json").read_text())
+    assert summary["status"] == "success" and summary["points"] == len(data) and summary["harmonics"] == 8
+    assert summary["folds"] == [] and "timings_s" in summary and "config" in summary
+    if summary["stability"]["available"]:
+        assert set(np.unique(data[:, 7])) <= {0.0, 1.0}
+        assert np.all(data[:, 6] > 0)
+    assert (out / "frc.png").stat().st_size > 1000
