@@ -176,12 +176,16 @@ def solve_periodic(
         result = _newton(hb, system, omega, z, tolerance, 3)
         tried.append("direct linear solve")
     else:
+        start_name = "given"
         if z0 is None:
             linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
             start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
-            z0 = start.z
+            z0 = np.array(start.z)
+            if model.contact == "backlash":  # the loaded teeth sit half the backlash further on
+                z0[0] += 0.5 * float(model.backlash_m) / float(system.displacement_scale)
+            start_name = "LTV"
         result = _newton(hb, system, omega, z0, tolerance, max_iterations)
-        tried.append(f"Newton from the {'given' if z0 is not None else 'LTV'} start ({result.iterations} iterations)")
+        tried.append(f"Newton from the {start_name} start ({result.iterations} iterations)")
         name = _smoothing_field(model)
         if not result.converged and name is not None:
             target = getattr(model.friction, name)
