@@ -10,6 +10,7 @@ velocity is continued from a gentle value down to the requested one. Non-converg
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import jax.numpy as jnp
 import numpy as np
@@ -69,24 +70,27 @@ class PeriodicSolution:
         """``(q, qd)`` at fractions of the base period, shapes ``(ndof, n)``."""
         tau = 2 * np.pi * np.asarray(base_fraction, dtype=float)
         k = np.arange(1, self.harmonics + 1)
-        cos, sin = np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau))
+        return self._synthesize(np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
+
+    def _synthesize(self, cos, sin):
+        k = np.arange(1, self.harmonics + 1)
         a, b = self.coefficients[:, 1::2], self.coefficients[:, 2::2]
-        w = self.base_frequency
         q = self.coefficients[:, :1] + a @ cos + b @ sin
-        qd = w * ((b * k) @ cos - (a * k) @ sin)
+        qd = self.base_frequency * ((b * k) @ cos - (a * k) @ sin)
         return q, qd
 
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
-        s, w = mesh_period_rule(self.model.breakpoint_candidates(), 2 * self.harmonics // self.nu + 8)
-        s, w = np.asarray(s), np.asarray(w)
-        base = np.concatenate([(j + s) / self.nu for j in range(self.nu)])
-        return base, np.tile(s, self.nu), np.tile(w, self.nu) / self.nu
+        base, s, w, _, _ = _read_out_rule(self._breakpoints(), self.harmonics, self.nu)
+        return base, s, w
+
+    def _breakpoints(self):
+        return tuple(np.round(np.asarray(self.model.breakpoint_candidates(), dtype=float), 15))
 
     def summary(self) -> dict:
         """The INTERFACE read-outs (µm, W) from exact quadrature over the period."""
-        base, s, w = self.quadrature()
-        q, qd = self.state_at(base)
+        base, s, w, cos, sin = _read_out_rule(self._breakpoints(), self.harmonics, self.nu)
+        q, qd = self._synthesize(cos, sin)
         out = periodic_summary(self.model, self.omega_pinion, s, q, qd, w, self.u_static_m, self.reaction_force_N)
         dense = self.state_at(np.linspace(0.0, 1.0, 16 * self.harmonics + 1))[0][0]
         out["dte_p2p_um"] = max(out["dte_p2p_um"], 1e6 * float(np.ptp(dense)))
@@ -125,6 +129,16 @@ class PeriodicSolution:
         rows = [(0.0, 1e6 * float(mean), 0.0)]
         rows += [((k + 1) / self.nu, 1e6 * float(amp[k]), float(np.degrees(phase[k]))) for k in range(self.harmonics)]
         return rows
+
+
+@lru_cache(maxsize=32)
+def _read_out_rule(breakpoints: tuple, harmonics: int, nu: int):
+    """Quadrature over one base period for read-outs, with its trigonometric basis (cached per geometry)."""
+    s, w = mesh_period_rule(np.asarray(breakpoints), 2 * harmonics // nu + 8)
+    s, w = np.asarray(s), np.asarray(w)
+    base = np.concatenate([(j + s) / nu for j in range(nu)])
+    tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+    return base, np.tile(s, nu), np.tile(w, nu) / nu, np.cos(tau), np.sin(tau)
 
 
 def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
