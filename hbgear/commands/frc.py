@@ -301,6 +301,13 @@ def run(config, args, out_dir) -> int:
             f"stopped at {speed_rpm[-1]:.6g} rpm: {branch.message}. The partial curve ({len(branch)} points) was "
             f"written to {out_dir / 'frc.csv'} with the status in frc.json"
         )
+    peak = summary["peak"]
+    print(
+        f"frc: {len(branch)} points from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={harmonics}, nu={nu}); "
+        f"peak DTE p2p {peak['dte_p2p_um']:.4g} um at {peak['speed_rpm']:.6g} rpm; "
+        f"{len(summary['fold_speeds_rpm'])} folds; {summary['stability']['unstable_points']} unstable points; "
+        f"{summary['timings_s']['total']:.1f} s -> {out_dir}"
+    )
     return 0
 
 
