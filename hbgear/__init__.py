@@ -15,6 +15,30 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+
+def _enable_compilation_cache() -> None:
+    """Keep compiled XLA programs on disk across runs (``HBGEAR_CACHE_DIR``; ``HBGEAR_NO_CACHE=1`` disables).
+
+    A frequency-response curve spends most of a short run compiling the residual; with the
+    cache a second run of the same problem size starts at once.
+    """
+    import os
+    from pathlib import Path
+
+    if os.environ.get("HBGEAR_NO_CACHE"):
+        return
+    default = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hbgear" / "jax"
+    path = Path(os.environ.get("HBGEAR_CACHE_DIR", default))
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    _jax.config.update("jax_compilation_cache_dir", str(path))
+    _jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+
+
+_enable_compilation_cache()
+
 from .build import build_model as build_model  # noqa: E402
 from .config import load_config as load_config  # noqa: E402
 from .errors import ConfigError as ConfigError, ConvergenceError as ConvergenceError  # noqa: E402
