@@ -83,7 +83,7 @@ class HarmonicBalance:
         if isinstance(traced, jax.core.Tracer):  # called under an outer jit/vmap: build in-trace
             s, w = mesh_period_rule(traced, max_mesh_order, jnp)
             phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
-            return s, jnp.cos(phase) * w, jnp.sin(phase) * w
+            return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None
         breakpoints = tuple(np.round(np.asarray(traced, dtype=float), 15))
         key = (breakpoints, max_mesh_order)
         if key not in _QUADRATURE_CACHE:
@@ -92,7 +92,32 @@ class HarmonicBalance:
             s, w = mesh_period_rule(np.asarray(breakpoints), max_mesh_order)
             phase = 2 * np.pi * np.outer(np.arange(max_mesh_order + 1), s)
             _QUADRATURE_CACHE[key] = tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
-        return _QUADRATURE_CACHE[key]
+        quad = _QUADRATURE_CACHE[key]
+        return quad + (self._frozen_blocks(system, p, quad),)
+
+    def _frozen_blocks(self, system, p, quad):
+        """``(K_conv, C_conv)`` blocks when the system declares them independent of ``p``.
+
+        For a speed sweep of the gear pair the periodic stiffness and damping coefficients do
+        not depend on the speed (only the forcing and ``D(w)`` do), so they are built once per
+        system and reused: the residual then costs a fraction of the full construction.
+        """
+        if not getattr(system, "coefficients_independent_of_parameter", False):
+            return None
+        leaves, treedef = jax.tree_util.tree_flatten(system)
+        key = (self, treedef, tuple(np.asarray(leaf).tobytes() for leaf in leaves), quad[0].shape)
+        if key not in _FROZEN_CACHE:
+            if len(_FROZEN_CACHE) > 64:
+                _FROZEN_CACHE.clear()
+            _FROZEN_CACHE[key] = self._blocks_jit(system, p, quad + (None,))
+        return _FROZEN_CACHE[key]
+
+    @partial(jax.jit, static_argnums=0)
+    def _blocks_jit(self, system, p, quad):
+        _, stiffness, damping = self._periodic_coefficients(system, p, quad)
+        return fourier.convolution_matrix(stiffness, self.harmonics, jnp), fourier.convolution_matrix(
+            damping, self.harmonics, jnp
+        )
 
     def _periodic_coefficients(self, system, p, quad):
         """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
@@ -101,10 +126,12 @@ class HarmonicBalance:
         coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes.
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
-        s, kernel_cos, kernel_sin = quad
+        s, kernel_cos, kernel_sin, frozen = quad
         eye = jnp.eye(n)
-        probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros((n, n))])
-        probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros((n, n)), eye])
+        if frozen is not None:  # only the forcing is needed: probe at 0 alone
+            eye = jnp.zeros((0, n))
+        probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros_like(eye)])
+        probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros_like(eye), eye])
         ones = jnp.ones_like(s)
 
         def force(qv, vv):
@@ -123,8 +150,11 @@ class HarmonicBalance:
         H = self.harmonics
         quad = self.quadrature(system) if quad is None else quad
         forcing, stiffness, damping = self._periodic_coefficients(system, p, quad)
-        k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
-        c_conv = fourier.convolution_matrix(damping, H, jnp)
+        if quad[3] is not None:
+            k_conv, c_conv = quad[3]
+        else:
+            k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
+            c_conv = fourier.convolution_matrix(damping, H, jnp)
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
         mass = system.mass_matrix(p, jnp)
         op = mass[:, :, None, None] * (d @ d)[None, None] + k_conv + c_conv @ d[None, None]
@@ -234,3 +264,4 @@ class HarmonicBalance:
 
 
 _QUADRATURE_CACHE: dict = {}
+_FROZEN_CACHE: dict = {}

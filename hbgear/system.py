@@ -60,6 +60,20 @@ class GearSystem:
         return 1 if self.model.boundary == "reaction" else None
 
     @property
+    def coefficients_independent_of_parameter(self) -> bool:
+        """True when the periodic stiffness and damping coefficients do not depend on ``p``.
+
+        In a speed sweep they come from ``k(t)``, ``c(t)`` and, for formulation B with a
+        linear-friction coupling, the nominal friction factors: those depend on the speed only
+        through a law with a velocity scale (arctan, Kelley--Lemanski).
+        """
+        if self.parameter != "speed":
+            return False
+        m = self.model
+        friction_in_coefficients = m.friction_is_linear and m.formulation == "B"
+        return not friction_in_coefficients or m.friction.name in ("none", "coulomb")
+
+    @property
     def displacement_scale(self):
         return self.model.normal_load_N / self.model.k_mean_N_per_m
 
@@ -100,6 +114,7 @@ class Duffing:
 
     ndof = 1
     free_mean_dof = None
+    coefficients_independent_of_parameter = True
     displacement_scale = 1.0
     force_scale = 1.0
 
