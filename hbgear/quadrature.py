@@ -48,6 +48,8 @@ def mesh_period_rule(breakpoints, max_order: int, xp=np):
     a, b = edges[:-1], edges[1:]
     # phase span 2 pi r h <= 3 per sub-interval with 8-point Gauss-Legendre: error ~1e-11
     sub = max(4, int(np.ceil(2.1 * max(max_order, 1))))
+    if xp is np:  # concrete breakpoints: sub-intervals in proportion to each interval's width
+        return _proportional_rule(np.asarray(a), np.asarray(b), sub)
     unit = _unit_layout(sub, _GRADE_LEVELS)
     x, wx = np.polynomial.legendre.leggauss(_GL_ORDER)
     lo, hi = unit[:-1], unit[1:]
@@ -57,6 +59,21 @@ def mesh_period_rule(breakpoints, max_order: int, xp=np):
     s = (a[:, None] + width[:, None] * xp.asarray(unit_nodes)[None]).ravel()
     w = (width[:, None] * xp.asarray(unit_weights)[None]).ravel()
     return s, w
+
+
+def _proportional_rule(a: np.ndarray, b: np.ndarray, sub: int):
+    """The rule of :func:`mesh_period_rule` with ``ceil(sub * width)`` sub-intervals per interval."""
+    x, wx = np.polynomial.legendre.leggauss(_GL_ORDER)
+    nodes, weights = [], []
+    for lo, hi in zip(a, b):
+        width = hi - lo
+        if width <= 0.0:
+            continue
+        unit = _unit_layout(max(2, int(np.ceil(sub * width))), _GRADE_LEVELS)
+        u0, u1 = unit[:-1], unit[1:]
+        nodes.append((lo + width * (0.5 * (u0 + u1)[:, None] + 0.5 * (u1 - u0)[:, None] * x[None])).ravel())
+        weights.append((width * 0.5 * (u1 - u0)[:, None] * wx[None]).ravel())
+    return np.concatenate(nodes), np.concatenate(weights)
 
 
 def fourier_coefficients(values, s, w, max_order: int, xp=np):
