@@ -1,0 +1,107 @@
+"""Run all hbgear benchmarks in one process on this machine and print one table of results.
+
+``/tmp/venv/bin/python benchmarks/run.py [--quick]`` (``--quick``: smaller ranges, fewer
+repeats, a few minutes). Each benchmark prints its own details first; the summary table at the
+end sets each measured number next to its goal from the issue. The machine (``nproc``, CPU
+model, load average) and the versions are printed with it: compare numbers from one run only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def machine():
+    cpu = "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import jax
+    import numpy
+    import scipy
+
+    load = os.getloadavg() if hasattr(os, "getloadavg") else ("?",)
+    return (f"nproc {os.cpu_count()}, CPU {cpu}, load average {load[0]:.1f}; Python {platform.python_version()}, "
+            f"jax {jax.__version__}, numpy {numpy.__version__}, scipy {scipy.__version__}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    q = args.quick
+    import bench_duffing_tools
+    import bench_frc_vs_ti
+    import bench_newton_breakdown
+    import bench_stability_map
+
+    t0 = time.perf_counter()
+    print("#", machine(), flush=True)
+    print("\n## 1. frequency-response curve, HB continuation vs time integration", flush=True)
+    frc = bench_frc_vs_ti.run(q)  # first: its compile time must be cold
+    print(bench_frc_vs_ti.table(frc), flush=True)
+    print("\n## 2. Duffing, hbgear vs other Python HB tools", flush=True)
+    duff_rows, notes = bench_duffing_tools.run(q)
+    print(bench_duffing_tools.table(duff_rows))
+    for n in notes:
+        print("note:", n)
+    print("\n## 3. stability maps", flush=True)
+    smap = bench_stability_map.run(q)
+    print(bench_stability_map.table(smap), flush=True)
+    print("\n## 4. where the time of a continuation step goes", flush=True)
+    b, protos = bench_newton_breakdown.run(q)
+    print(bench_newton_breakdown.table(b, protos), flush=True)
+
+    t = b["timer"]
+    pts = b["points"]
+    floor_ms = b["steps"] * b["lu_ms"] / pts
+    hb_rows = [r for r in duff_rows if r["tool"].startswith("hbgear (ds_max")] or duff_rows[:1]
+    hbd = hb_rows[0]
+    others = [r for r in duff_rows if not r["tool"].startswith("hbgear")]
+    best_other = min(others, key=lambda r: r["per_point_ms"]) if others else None
+    rows = [
+        ("1", "HB per point vs TI per point (after compile)", f"{frc['speedup_per_point']:.0f}x", ">= 1000x"),
+        ("1", "first-curve overhead (start solution + compile)", f"{frc['first_s']:.1f} s", "<= 5 s"),
+        ("1", "HB vs TI, max DTE waveform error", f"{100 * frc['max_error']:.3f} %", "<= 0.5 %"),
+        ("1", "points on the curve", f"{frc['points']}", ">= 400"),
+        ("2", "hbgear per point (curve only)", f"{hbd['per_point_ms']:.2f} ms", ""),
+        ("2", "hbgear per point with Hill on every point",
+         f"{1e3 * (hbd['curve_s'] + hbd['hill_s']) / hbd['points']:.2f} ms", ""),
+    ]
+    if best_other is not None:
+        rows.append(("2", f"fastest other: {best_other['tool']}", f"{best_other['per_point_ms']:.2f} ms", ""))
+        rows.append(("2", "speed-up hbgear (with Hill) vs fastest other",
+                     f"{best_other['per_point_ms'] / (1e3 * (hbd['curve_s'] + hbd['hill_s']) / hbd['points']):.1f}x",
+                     ">= 5x"))
+    else:
+        rows.append(("2", "other tools", "not run (see note)", ""))
+    rows += [
+        ("3", "LTV-A map 100 x 50, after compilation", f"{smap['ltv_map_s']:.3f} s", "<= 2 s"),
+        ("3", "NLTV Hill map, per point (HB + Hill)", f"{1e3 * smap['nltv_per_point_s']:.0f} ms", ""),
+        ("4", "per point total / LU floor", f"{b['wall'] / (floor_ms * pts / 1e3):.0f}x", "<= 3x"),
+        ("4", "share in (R, J, dR/dp) + R evaluations",
+         f"{100 * (t.total.get('eval (R,J,dR/dp)', 0) + t.total.get('eval R (line search)', 0)) / b['wall']:.0f} %", ""),
+        ("4", "share in linear algebra",
+         f"{100 * sum(v for k, v in t.total.items() if k.startswith('linalg.')) / b['wall']:.0f} %", ""),
+    ]
+    print("\n## summary (one run, this machine)")
+    print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")
+    for r in rows:
+        print(f"{r[0]:2s} {r[1]:58s} {r[2]:>12s} {r[3]:>9s}")
+    print(f"\nwall time of the benchmark run: {time.perf_counter() - t0:.0f} s; {machine()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
