@@ -1006,7 +1006,8 @@ def main(argv=None) -> int:
     try:
         for chk in todo:
             selected = args.only is None or chk.name in args.only
-            cached = None if (args.fresh or (args.only and selected)) else _load_cached(chk.name)
+            # --fresh and --only recompute the selected checks; the others keep their cached records
+            cached = None if (selected and (args.fresh or args.only)) else _load_cached(chk.name)
             if cached is None and not selected:
                 cached = {"name": chk.name, "title": chk.title, "rows": [], "figures": [], "seconds": 0.0,
                           "status": "not run", "note": "**Not run** in this invocation (no cached result)."}
