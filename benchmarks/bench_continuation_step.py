@@ -8,7 +8,9 @@ Two curves, each run once to compile and then ``--repeats`` times (median of ``t
   tolerance 1e-9), 12000 -> 15000 rpm, with :func:`hbgear.commands.frc.gear_residual_functions`
   and :func:`~hbgear.commands.frc.frc_method`.
 
-The residual functions are wrapped with call counters (the wrappers cost ~1 us per call).
+The residual functions are wrapped with call counters (the wrappers cost ~1 us per call); the
+same wrapped callables are passed to every run of a version (``jit_step`` then traces once, in
+the compiling run). The versions take turns within each round, since the machine's load drifts.
 ``--baseline FILE`` also runs another version of ``hbgear/continuation.py`` (e.g. the previous
 one, ``git show HEAD:hbgear/continuation.py > /tmp/before.py``) on the same problems and
 compares its points with the current version's (max |z diff| over points, when the two runs
@@ -89,15 +91,16 @@ def gear_problem():
 
     def method(module, **kw):
         base = frc_method(w0, w1)
-        fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+        known = {f.name for f in dataclasses.fields(module.PseudoArclength)}
+        fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in known}
         return module.PseudoArclength(**{**fields, **kw})
 
     return dict(name=f"gear pair LTV H={H} N={N}, 12000 -> 15000 rpm", rj=rj, r=r, z0=np.asarray(start.z), p0=w0, p1=w1,
                 tol=tol, method=method, max_points=4000, hb=hb, system=system)
 
 
-def run_once(module, prob, method_kw):
-    rj, r = Counted(prob["rj"]), Counted(prob["r"])
+def run_once(module, prob, method_kw, rj, r):
+    rj.calls = r.calls = 0
     method = prob["method"](module, **method_kw)
     a = time.perf_counter()
     branch = module.continuation(rj, r, prob["z0"], prob["p0"], prob["p1"], method, tolerance=prob["tol"],
@@ -105,16 +108,25 @@ def run_once(module, prob, method_kw):
     return time.perf_counter() - a, branch, rj.calls, r.calls
 
 
-def measure(module, prob, method_kw, repeats):
-    first, branch, _, _ = run_once(module, prob, method_kw)  # compiles
-    times = []
+def measure(runs, prob, repeats):
+    """Each version once to compile, then `repeats` rounds in turn (the machine's load drifts).
+    The same callables are passed every time, as a caller that runs several curves would."""
+    out = {}
+    for label, module, kw in runs:
+        rj, r = Counted(prob["rj"]), Counted(prob["r"])
+        first, _, _, _ = run_once(module, prob, kw, rj, r)
+        out[label] = dict(first=first, times=[], fns=(rj, r))
     for _ in range(repeats):
-        t, branch, n_rj, n_r = run_once(module, prob, method_kw)
-        times.append(t)
-    n = len(branch)
-    return dict(first=first, median=statistics.median(times), times=times, branch=branch, points=n,
-                rj_per_point=n_rj / n, r_per_point=n_r / n, iterations=float(np.mean(branch.iterations)),
-                rejected=branch.rejected)
+        for label, module, kw in runs:
+            res = out[label]
+            t, branch, n_rj, n_r = run_once(module, prob, kw, *res["fns"])
+            n = len(branch)
+            res["times"].append(t)
+            res.update(branch=branch, points=n, rj_per_point=n_rj / n, r_per_point=n_r / n,
+                       iterations=float(np.mean(branch.iterations)), rejected=branch.rejected)
+    for res in out.values():
+        res["median"] = statistics.median(res["times"])
+    return out
 
 
 def compare(a, b):
@@ -154,10 +166,8 @@ def main(argv=None):
         print(f"\n== {prob['name']} (median of {args.repeats} runs after a compiling run)")
         print(f"{'version':10s} {'points':>6s} {'ms/point':>9s} {'runs [s]':>22s} {'first [s]':>9s} {'(R,J,Jp)/pt':>11s} "
               f"{'R/pt':>6s} {'iter/pt':>7s} {'rejected':>8s}")
-        results = {}
-        for label, module, kw in runs:
-            res = measure(module, prob, kw, args.repeats)
-            results[label] = res
+        results = measure(runs, prob, args.repeats)
+        for label, res in results.items():
             runs_s = " ".join(f"{t:.2f}" for t in res["times"])
             print(f"{label:10s} {res['points']:6d} {1e3 * res['median'] / res['points']:9.2f} {runs_s:>22s} "
                   f"{res['first']:9.2f} {res['rj_per_point']:11.2f} {res['r_per_point']:6.2f} {res['iterations']:7.2f} "

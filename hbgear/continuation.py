@@ -31,6 +31,7 @@ from __future__ import annotations
 import enum
 import math
 import sys
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
@@ -89,6 +90,13 @@ class PseudoArclength:
     - `max_parameter_step`: largest predicted change of ``p/p_ref`` per step [-] (``None``: no
       limit) -- the resolution in ``p`` where the branch is flat while ``ds_max`` is sized for
       the unknowns.
+    - `jit_step`: run each corrector (Newton iterations, line search, tangent) as ONE compiled
+      JAX function (``lax.while_loop``) instead of a Python loop. Needs residual functions that
+      JAX can trace in ``(z, p)`` (e.g. :meth:`hbgear.hb.HarmonicBalance.residual_and_jacobians`
+      with the system closed over); otherwise the run falls back to the Python corrector with
+      a warning. Same algorithm, same points to rounding (LU by XLA instead of scipy); it
+      removes the per-evaluation dispatch and conversion overhead, which dominates small and
+      mid-size problems. Costs one compilation per run (~1-3 s).
     """
 
     ds: float = 1e-2
@@ -100,6 +108,7 @@ class PseudoArclength:
     parameter_scale: float | None = None
     growth: float = 2.0
     max_parameter_step: float | None = None
+    jit_step: bool = False
 
     def __post_init__(self):
         if not (0 < self.ds_min <= self.ds <= self.ds_max and math.isfinite(self.ds_max)):
@@ -165,7 +174,7 @@ class Branch:
 class _Point(NamedTuple):
     y: np.ndarray  # (z, p/p_ref)
     r_norm: float
-    jac: np.ndarray  # [R_z, R_p p_ref], (size, size+1)
+    tangent: np.ndarray  # unit tangent at y, oriented along the `previous` given to the corrector
     iterations: int
 
 
@@ -175,24 +184,190 @@ class _Failure(NamedTuple):
     iterations: int
 
 
+_FAILURES = {1: "non-finite residual", 2: "singular bordered Jacobian"}
+
+
 def _unit(v):
     return v / np.linalg.norm(v)
 
 
-def _tangent(jac, previous):
-    """Unit null vector of ``jac`` with ``t . previous > 0``."""
-    n = jac.shape[0]
-    a = np.vstack([jac, previous[None, :]])
+def _tangent(bordered, previous):
+    """Unit null vector of ``J = bordered[:-1]`` with ``t . previous > 0``; ``bordered`` is the
+    ``(m+1, m+1)`` buffer holding ``J``, its last row is overwritten with ``previous``."""
+    n = bordered.shape[0] - 1
+    bordered[n] = previous
     b = np.zeros(n + 1)
     b[-1] = 1.0
     try:
-        t = scipy.linalg.solve(a, b, check_finite=False)
+        t = scipy.linalg.solve(bordered, b, check_finite=False)
     except (np.linalg.LinAlgError, ValueError):
         t = np.full(n + 1, np.nan)
     if not np.all(np.isfinite(t)):  # degenerate border: fall back to the SVD null vector
-        t = np.linalg.svd(jac)[2][-1]
+        t = np.linalg.svd(bordered[:n])[2][-1]
     t = _unit(t)
     return t if t @ previous >= 0 else -t
+
+
+def _python_corrector(residual_and_jacobians, residual, scale, size):
+    """``correct(y_pred, row, target, previous, max_iter, tolerance) -> _Point | _Failure``:
+    Newton on ``R(y) = 0``, ``row . y = target`` with a backtracking line search on ``max |R|``
+    (residual only, and only when the full step does not decrease it), then the tangent at the
+    converged point from the Jacobian already evaluated there."""
+
+    def evaluate(y):
+        """``(R, A)``: ``A`` the bordered matrix ``[[R_z, R_p p_ref], [.]]``, last row unset."""
+        r, jz, jp = residual_and_jacobians(y[:-1], float(y[-1] * scale))
+        a = np.empty((size + 1, size + 1), order="F")
+        a[:size, :size] = np.asarray(jz, dtype=float)
+        a[:size, size] = scale * np.asarray(jp, dtype=float).reshape(-1)
+        return np.asarray(r, dtype=float), a
+
+    def norm_of(y):
+        return float(np.max(np.abs(np.asarray(residual(y[:-1], float(y[-1] * scale))))))
+
+    def correct(y_pred, row, target, previous, max_iter, tolerance):
+        y = y_pred.copy()
+        r, a = evaluate(y)
+        norm = float(np.max(np.abs(r)))
+        b = np.empty(size + 1)
+        for it in range(max_iter + 1):
+            if not np.isfinite(norm):
+                return _Failure(_FAILURES[1], norm, it)
+            if norm <= tolerance and abs(row @ y - target) <= 1e-12 * (1 + abs(target)):
+                return _Point(y, norm, _tangent(a, previous), it)
+            if it == max_iter:
+                break
+            a[size] = row
+            b[:size] = -r
+            b[size] = -(row @ y - target)
+            try:  # `a` is this iterate's own buffer: factor it in place
+                step = scipy.linalg.lu_solve(scipy.linalg.lu_factor(a, overwrite_a=True, check_finite=False), b,
+                                             check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                return _Failure(_FAILURES[2], norm, it)
+            if not np.all(np.isfinite(step)):
+                return _Failure(_FAILURES[2], norm, it)
+            trial = y + step
+            r_trial, a_trial = evaluate(trial)
+            trial_norm = float(np.max(np.abs(r_trial)))
+            if not (np.isfinite(trial_norm) and trial_norm < (1 - 1e-4) * norm):
+                alpha = 1.0  # backtracking on max|R| (the linear constraint stays satisfied)
+                while alpha > 1 / 8:
+                    alpha *= 0.5
+                    trial = y + alpha * step
+                    trial_norm = norm_of(trial)
+                    if np.isfinite(trial_norm) and trial_norm < (1 - 1e-4 * alpha) * norm:
+                        break
+                r_trial, a_trial = evaluate(trial)
+                trial_norm = float(np.max(np.abs(r_trial)))
+            y, r, a, norm = trial, r_trial, a_trial, trial_norm
+        return _Failure(f"not converged in {max_iter} corrector iterations", norm, max_iter)
+
+    return correct
+
+
+def _jit_corrector(residual_and_jacobians, residual, scale, size):
+    """The same corrector as :func:`_python_corrector` as one compiled JAX function.
+
+    One loop turn = one ``(R, R_z, R_p)`` evaluation at a candidate; ``mode`` says what the
+    candidate is: 0 the predictor (taken as it is), 1 a full Newton step (taken if it decreases
+    ``max |R|``, else a residual-only backtracking gives the next candidate), 2 the result of a
+    backtracking (taken as it is). ``status``: -1 running, 0 converged, 1 non-finite residual,
+    2 singular bordered Jacobian, 3 not converged in ``max_iter``. So each callable is traced
+    once, whatever the number of iterations.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    # Under jit every jnp operation is staged, even on constants; evaluating those at trace time
+    # instead lets the callables see concrete values where they do not depend on (z, p) (e.g.
+    # HarmonicBalance's quadrature rule and frozen coefficient blocks come from its caches
+    # instead of being rebuilt inside the compiled step).
+    def evaluate(y):
+        with jax.ensure_compile_time_eval():
+            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
+        jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
+                               scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
+        return jnp.asarray(r, dtype=float).reshape(size), jac
+
+    def norm_of(y):
+        with jax.ensure_compile_time_eval():
+            r = residual(y[:-1], y[-1] * scale)
+        return jnp.max(jnp.abs(jnp.asarray(r, dtype=float)))
+
+    def tangent(jac, previous):
+        a = jnp.concatenate([jac, previous[None]], axis=0)
+        t = jnp.linalg.solve(a, jnp.zeros(size + 1).at[-1].set(1.0))
+        t = jax.lax.cond(jnp.all(jnp.isfinite(t)), lambda: t, lambda: jnp.linalg.svd(jac)[2][-1])
+        t = t / jnp.linalg.norm(t)
+        return jnp.where(t @ previous >= 0, t, -t)
+
+    @jax.jit
+    def correct(y_pred, row, target, previous, max_iter, tolerance):
+        def cond(s):
+            return s["status"] < 0
+
+        def body(s):
+            r_c, jac_c = evaluate(s["cand"])
+            norm_c = jnp.max(jnp.abs(r_c))
+            decreased = jnp.isfinite(norm_c) & (norm_c < (1 - 1e-4) * s["norm"])
+
+            def take(_):
+                it = s["it"] + jnp.where(s["mode"] == 0, 0, 1)
+                y, residual_y = s["cand"], row @ s["cand"] - target
+                converged = (norm_c <= tolerance) & (jnp.abs(residual_y) <= 1e-12 * (1 + jnp.abs(target)))
+                status = jnp.where(~jnp.isfinite(norm_c), 1,
+                                   jnp.where(converged, 0, jnp.where(it >= max_iter, 3, -1))).astype(jnp.int32)
+
+                def newton_step(_):
+                    a = jnp.concatenate([jac_c, row[None]], axis=0)
+                    step = jnp.linalg.solve(a, -jnp.append(r_c, residual_y))
+                    ok = jnp.all(jnp.isfinite(step))
+                    return jnp.where(ok, y + step, y), step, jnp.where(ok, -1, 2).astype(jnp.int32)
+
+                cand, step, status = jax.lax.cond(status < 0, newton_step,
+                                                  lambda _: (y, s["step"], status), None)
+                return dict(it=it.astype(jnp.int32), y=y, jac=jac_c, norm=norm_c, cand=cand, step=step,
+                            mode=jnp.ones_like(s["mode"]), status=status)
+
+            def backtrack(_):
+                y, step, norm = s["y"], s["step"], s["norm"]
+
+                def ls_cond(c):
+                    alpha, ok = c
+                    return (alpha > 1 / 8) & ~ok
+
+                def ls_body(c):
+                    alpha = 0.5 * c[0]
+                    n = norm_of(y + alpha * step)
+                    return alpha, jnp.isfinite(n) & (n < (1 - 1e-4 * alpha) * norm)
+
+                alpha, _ = jax.lax.while_loop(ls_cond, ls_body, (jnp.asarray(1.0, float), jnp.asarray(False)))
+                return {**s, "cand": y + alpha * step, "mode": jnp.full_like(s["mode"], 2)}
+
+            return jax.lax.cond((s["mode"] != 1) | decreased, take, backtrack, None)
+
+        i32 = jnp.int32
+        init = dict(it=jnp.asarray(0, i32), y=y_pred, jac=jnp.zeros((size, size + 1)), norm=jnp.asarray(jnp.inf),
+                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.asarray(0, i32), status=jnp.asarray(-1, i32))
+        s = jax.lax.while_loop(cond, body, init)
+        t = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous), lambda: jnp.full(size + 1, jnp.nan))
+        return s["y"], s["norm"], s["it"], s["status"], t
+
+    def call(y_pred, row, target, previous, max_iter, tolerance):
+        y, norm, it, status, t = jax.device_get(correct(y_pred, row, float(target), previous, int(max_iter),
+                                                        float(tolerance)))
+        status, norm = int(status), float(norm)
+        if status == 0:
+            return _Point(np.array(y), norm, np.array(t), int(it))
+        if status == 3:
+            return _Failure(f"not converged in {max_iter} corrector iterations", norm, int(max_iter))
+        return _Failure(_FAILURES[status], norm, int(it))
+
+    return call
+
+
+_JIT_CACHE: dict = {}  # (residual_and_jacobians, residual, p_ref, size) -> compiled corrector
 
 
 def _angle_deg(a, b):
@@ -241,50 +416,30 @@ def continuation(
     z0 = np.asarray(z0, dtype=float)
     size = z0.size
 
-    def evaluate(y):
-        r, jz, jp = residual_and_jacobians(y[:-1], float(y[-1] * scale))
-        r = np.asarray(r, dtype=float)
-        jac = np.hstack([np.asarray(jz, dtype=float), scale * np.asarray(jp, dtype=float).reshape(-1, 1)])
-        return r, jac
+    python_correct = _python_corrector(residual_and_jacobians, residual, scale, size)
+    corrector = [python_correct]
+    if m.jit_step:
+        key = (residual_and_jacobians, residual, scale, size)
+        if key not in _JIT_CACHE:  # the same callables again (e.g. repeated runs): no new trace
+            if len(_JIT_CACHE) >= 8:
+                _JIT_CACHE.pop(next(iter(_JIT_CACHE)))
+            _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, scale, size)
+        corrector[0] = _JIT_CACHE[key]
 
-    def norm_of(y):
-        return float(np.max(np.abs(np.asarray(residual(y[:-1], float(y[-1] * scale))))))
-
-    def correct(y_pred, row, target, max_iter):
-        """Newton on ``R(y) = 0``, ``row . y = target``; returns a _Point or a _Failure."""
-        y = y_pred.copy()
-        r, jac = evaluate(y)
-        norm = float(np.max(np.abs(r)))
-        for it in range(max_iter + 1):
-            if not np.isfinite(norm):
-                return _Failure("non-finite residual", norm, it)
-            if norm <= tolerance and abs(row @ y - target) <= 1e-12 * (1 + abs(target)):
-                return _Point(y, norm, jac, it)
-            if it == max_iter:
-                break
-            a = np.vstack([jac, row[None, :]])
-            b = -np.append(r, row @ y - target)
-            try:
-                step = scipy.linalg.lu_solve(scipy.linalg.lu_factor(a, check_finite=False), b, check_finite=False)
-            except (np.linalg.LinAlgError, ValueError):
-                return _Failure("singular bordered Jacobian", norm, it)
-            if not np.all(np.isfinite(step)):
-                return _Failure("singular bordered Jacobian", norm, it)
-            trial = y + step
-            r_trial, jac_trial = evaluate(trial)
-            trial_norm = float(np.max(np.abs(r_trial)))
-            if not (np.isfinite(trial_norm) and trial_norm < (1 - 1e-4) * norm):
-                alpha = 1.0  # backtracking on max|R| (the linear constraint stays satisfied)
-                while alpha > 1 / 8:
-                    alpha *= 0.5
-                    trial = y + alpha * step
-                    trial_norm = norm_of(trial)
-                    if np.isfinite(trial_norm) and trial_norm < (1 - 1e-4 * alpha) * norm:
-                        break
-                r_trial, jac_trial = evaluate(trial)
-                trial_norm = float(np.max(np.abs(r_trial)))
-            y, r, jac, norm = trial, r_trial, jac_trial, trial_norm
-        return _Failure(f"not converged in {max_iter} corrector iterations", norm, max_iter)
+    def correct(y_pred, row, target, max_iter, previous, tol=tolerance):
+        """Newton on ``R(y) = 0``, ``row . y = target``; a _Point (with the tangent oriented
+        along `previous`) or a _Failure."""
+        if corrector[0] is python_correct:
+            return python_correct(y_pred, row, target, previous, max_iter, tol)
+        try:
+            return corrector[0](y_pred, row, target, previous, max_iter, tol)
+        except Exception as error:  # not traceable by JAX: the Python corrector, same algorithm
+            warnings.warn(f"jit_step: the residual functions could not be compiled ({type(error).__name__}: "
+                          f"{str(error).splitlines()[0] if str(error) else ''}); using the Python corrector",
+                          RuntimeWarning, stacklevel=3)
+            corrector[0] = python_correct
+            _JIT_CACHE.pop((residual_and_jacobians, residual, scale, size), None)
+            return python_correct(y_pred, row, target, previous, max_iter, tol)
 
     # -- storage -----------------------------------------------------------------------------
     rows = {k: [] for k in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds")}
@@ -335,13 +490,15 @@ def continuation(
             f"after {start.iterations} iterations",
         )
     y = np.append(np.asarray(start.z, dtype=float), p0 / scale)
-    r, jac = evaluate(y)
     seed = np.zeros(size + 1)
     seed[-1] = direction
-    t = _tangent(jac, seed)
+    first = correct(y, seed * direction, y[-1], 0, seed, tol=math.inf)  # R, J at the start: the tangent
+    if not isinstance(first, _Point):
+        return finish(Status.START_FAILED, f"the Jacobian at p = {p0:.9g} could not be evaluated: {first.reason}")
+    t = first.tangent
     if t[-1] * direction <= 0:  # started on a fold or against the range: push towards p_end
         t = -t if t[-1] * direction < 0 else t
-    store(y, PointKind.START, start.iterations, float(np.max(np.abs(r))), t, 0.0, p=float(p0))
+    store(y, PointKind.START, start.iterations, first.r_norm, t, 0.0, p=float(p0))
 
     bar = _progress_bar(progress, p0, p_end)
     ds = m.ds
@@ -362,9 +519,9 @@ def continuation(
                 ds = max(m.ds_min, m.max_parameter_step / abs(t[-1]))
             while True:
                 y_pred = y + ds * t
-                result = correct(y_pred, t, t @ y_pred, m.max_corrector_iterations)
+                result = correct(y_pred, t, t @ y_pred, m.max_corrector_iterations, t)
                 if isinstance(result, _Point):
-                    t_new = _tangent(result.jac, t)
+                    t_new = result.tangent
                     angle = _angle_deg(t_new, t)
                     offset = float(np.linalg.norm(result.y - y_pred))
                     if offset > ds and ds > m.ds_min:
@@ -393,7 +550,7 @@ def continuation(
             if t_new[-1] * t[-1] < 0:
                 fold = _locate_fold(correct, y, t, y_new, float(t_new[-1]), m.max_corrector_iterations)
                 if fold is not None and (fold.y[-1] - end_scaled) * direction < 0:
-                    t_fold = _tangent(fold.jac, t)
+                    t_fold = fold.tangent
                     store(fold.y, PointKind.FOLD, fold.iterations, fold.r_norm, t_fold, float(t @ (fold.y - y)))
                     if len(rows["p"]) >= max_points:
                         y, t = fold.y, t_fold
@@ -405,9 +562,9 @@ def continuation(
                 guess = y + frac * (y_new - y)
                 row = np.zeros(size + 1)
                 row[-1] = 1.0
-                last = correct(guess, row, end_scaled, m.max_corrector_iterations)
+                last = correct(guess, row, end_scaled, m.max_corrector_iterations, t)
                 if isinstance(last, _Point):
-                    t_last = _tangent(last.jac, t)
+                    t_last = last.tangent
                     store(last.y, PointKind.END, last.iterations, last.r_norm, t_last, float(np.linalg.norm(last.y - y)), p=float(p_end))
                     status = Status.SUCCESS
                     y = last.y
@@ -448,10 +605,10 @@ def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
     h = float(t0 @ (y1 - y0))
 
     def at(s):
-        point = correct(y0 + s * t0, t0, float(t0 @ y0) + s, max_iter)
+        point = correct(y0 + s * t0, t0, float(t0 @ y0) + s, max_iter, t0)
         if not isinstance(point, _Point):
             return None, None
-        return point, _tangent(point.jac, t0)[-1]
+        return point, point.tangent[-1]
 
     s_lo, g_lo = 0.0, float(t0[-1])
     s_hi, g_hi = h, g1

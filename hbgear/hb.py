@@ -79,7 +79,8 @@ class HarmonicBalance:
         with the weights folded in, ``R = ceil(2H/nu)``.
         """
         max_mesh_order = -(-2 * self.harmonics // self.nu)
-        traced = system.breakpoints(p, jnp)
+        with jax.ensure_compile_time_eval():  # concrete whenever the system is, even under jit
+            traced = system.breakpoints(p, jnp)
         if isinstance(traced, jax.core.Tracer):  # called under an outer jit/vmap: build in-trace
             s, w = mesh_period_rule(traced, max_mesh_order, jnp)
             phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]

@@ -247,3 +247,49 @@ def test_frc_command_writes_the_curve(tmp_path, gear):
         assert set(np.unique(data[:, 7])) <= {0.0, 1.0}
         assert np.all(data[:, 6] > 0)
     assert (out / "frc.png").stat().st_size > 1000
+
+
+# ---------------------------------------------------------------------------- jit_step
+
+
+def test_jit_step_gives_the_same_branch(duffing_h7):
+    """The compiled corrector is the same algorithm: same steps, same points to rounding."""
+    jitted = continuation(*problem(HB7, DUFFING), np.zeros(HB7.size), 0.5, 2.0, PseudoArclength(jit_step=True),
+                          tolerance=1e-10, max_points=2000)
+    assert jitted.status == Status.SUCCESS, jitted.message
+    assert len(jitted) == len(duffing_h7) and np.array_equal(jitted.kind, duffing_h7.kind)
+    assert np.array_equal(jitted.iterations, duffing_h7.iterations)
+    assert np.max(np.abs(jitted.z - duffing_h7.z)) <= 1e-10
+    assert np.max(np.abs(jitted.p - duffing_h7.p)) <= 1e-10
+    assert np.max(np.abs(jitted.tangent_p - duffing_h7.tangent_p)) <= 1e-10
+    assert jitted.fold_p == pytest.approx(duffing_h7.fold_p, rel=1e-10)
+    assert np.max(jitted.residual) <= 1e-10
+
+
+def test_jit_step_failures_and_fallback():
+    def rj(z, p):  # traceable, non-finite beyond p = 1
+        bad = jnp.where(p > 1.0, jnp.nan, 0.0)
+        return jnp.stack([z[0] - p + bad]), jnp.eye(1), jnp.array([-1.0])
+
+    def r(z, p):
+        return rj(z, p)[0]
+
+    opts = dict(ds=0.1, ds_min=1e-6, ds_max=0.2, parameter_scale=1.0)
+    jitted = continuation(rj, r, [0.0], 0.0, 2.0, PseudoArclength(**opts, jit_step=True))
+    python = continuation(rj, r, [0.0], 0.0, 2.0, PseudoArclength(**opts))
+    assert jitted.status == python.status == Status.STEP_TOO_SMALL
+    assert "non-finite" in jitted.message and jitted.message == python.message
+    assert np.array_equal(jitted.p, python.p)
+
+    def circle_rj(z, p):  # numpy only: jit_step falls back to the Python corrector
+        return np.array([z[0] ** 2 + p**2 - 1]), np.array([[2 * z[0]]]), np.array([2 * p])
+
+    def circle_r(z, p):
+        return np.array([z[0] ** 2 + p**2 - 1])
+
+    opts = dict(ds=0.05, ds_max=0.1, parameter_scale=1.0)
+    with pytest.warns(RuntimeWarning, match="jit_step"):
+        fallback = continuation(circle_rj, circle_r, [0.9], 0.0, 2.0, PseudoArclength(**opts, jit_step=True), tolerance=1e-13)
+    plain = continuation(circle_rj, circle_r, [0.9], 0.0, 2.0, PseudoArclength(**opts), tolerance=1e-13)
+    assert fallback.status == plain.status == Status.TURNED_BACK
+    assert np.array_equal(fallback.z, plain.z) and np.array_equal(fallback.p, plain.p)
