@@ -89,6 +89,8 @@ def test_jax_jacobian_equals_finite_differences():
 
 CASES = [
     pytest.param(("friction.formulation=A",), 2400.0, id="LTV-A-2400"),
+    pytest.param(("friction.formulation=A",), 7000.0, id="LTV-A-7000"),
+    pytest.param(("friction.formulation=B",), 2400.0, id="LTV-B-2400"),
     pytest.param(("friction.formulation=B",), 7000.0, id="LTV-B-7000"),
     pytest.param(
         ("friction.model=NLTV", "friction.law=arctan", "mesh.damping_ratio=0.05"), 3000.0, id="NLTV-arctan-3000"
