@@ -6,16 +6,34 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 
 - `frc.csv`: ``speed_rpm, mesh_freq_hz, dte_mean_um, dte_rms_um, dte_p2p_um, dynamic_factor,
   max_abs_floquet, stable, nu, residual`` -- one row per continuation point in path order (a fold
-  shows as the speed going back; located folds are rows of their own);
+  shows as the speed going back; located folds are rows of their own); then the rows of every
+  period-doubled branch (``nu = 2``), each in path order from its bifurcation;
 - `frc.json`: run summary -- status and message, ``H`` (and how it was chosen), ``nu``, number of
-  points, folds (speeds), stability availability, continuation settings, timings, the config;
-- `frc.png`: DTE RMS and peak-to-peak against speed, unstable points and folds marked.
+  points, folds (speeds), stability availability, ``period_doubling`` (one record per -1
+  crossing: bracket, located speed and multiplier, the ``nu = 2`` branch's status, message,
+  point count, first frc.csv row, ranges) and ``period_doubling_rule``, continuation settings,
+  timings, the config;
+- `frc.png`: DTE RMS and peak-to-peak against speed, unstable points and folds marked, the
+  ``nu = 2`` branches in green, the period doublings as squares.
 
 ``harmonics = "auto"``: :func:`hbgear.solve.auto_harmonics` at both ends of the sweep, the larger
-``H`` is used for the whole curve. Stability: exact monodromy for linear models (batched), Hill's
-method per point otherwise, classified by :func:`hbgear.stability.is_stable`; if that module is
-missing, the Floquet columns are NaN and `frc.json` says so. If the continuation stops before the stop speed, the curve computed so
+``H`` is used for the whole curve. Stability: exact monodromy for linear models (batched), and
+for backlash models (otherwise linear) at the points where the teeth never separate (the
+linearisation is exactly the linear model's there); Hill's method per point otherwise, classified
+by :func:`hbgear.stability.is_stable`; if that module is missing, the Floquet columns are NaN and
+`frc.json` says so. If the continuation stops before the stop speed, the curve computed so
 far is still written (with the status in `frc.json`) and the run ends with exit status 1.
+
+Period doubling (MODEL.md section 6): on a ``nu = 1`` curve, every pair of consecutive points
+between which a real multiplier crosses -1 (:func:`hbgear.stability.period_doubling` changes) is
+refined on that segment (exact / variational monodromy, :func:`_locate_on_segment`; a crossing
+the exact multipliers do not confirm is listed as ``"not confirmed"``), and the ``nu = 2`` branch
+born there is followed (:func:`follow_period_doubling`, ``H2 = 2 H``, twice the AFT samples)
+until it leaves the sweep range (the last point exactly at its end), rejoins the ``nu = 1`` curve,
+or fails. Its points get the same stability method over two mesh periods. A failure is a record
+in frc.json and a warning on stderr; the ``nu = 1`` curve is kept and the exit status stays 0.
+``--no-period-doubling`` turns it off; by default it is on where cheap
+(:data:`PD_AUTO_MAX_UNKNOWNS`), ``--period-doubling`` forces it.
 """
 
 from __future__ import annotations
@@ -30,14 +48,15 @@ import numpy as np
 
 from ..build import build_model
 from ..cli import Command, register
-from ..continuation import PseudoArclength, continuation
+from ..continuation import PseudoArclength, Status, continuation
 from ..errors import ConvergenceError
 from ..hb import HarmonicBalance
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 from ..system import GearSystem
 
-__all__ = ["FRC", "COLUMNS", "run", "frc_method", "gear_residual_functions", "plot_frc"]
+__all__ = ["FRC", "COLUMNS", "run", "frc_method", "gear_residual_functions", "plot_frc",
+           "PD_AUTO_MAX_UNKNOWNS", "period_doubling_enabled", "follow_period_doubling"]
 
 COLUMNS = (
     "speed_rpm",
@@ -56,6 +75,11 @@ COLUMNS = (
 def add_arguments(parser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (default: only on a terminal)")
     parser.add_argument("--no-stability", action="store_true", help="skip the Floquet multipliers (columns NaN)")
+    pd = parser.add_mutually_exclusive_group()
+    pd.add_argument("--no-period-doubling", dest="period_doubling", action="store_const", const=False, default=None,
+                    help="do not look for period doublings nor follow the nu = 2 branches")
+    pd.add_argument("--period-doubling", dest="period_doubling", action="store_const", const=True,
+                    help="follow the nu = 2 branches even where the default cost rule would skip them")
 
 
 def gear_residual_functions(hb: HarmonicBalance, system):
@@ -109,67 +133,427 @@ def _harmonics(config, model, omega_start, omega_stop, nu):
     return harmonics, samples, start, text
 
 
-def _floquet(hb, system, branch, progress):
-    """``(max |multiplier| per point over the base period, stable per point, method, warning)``.
+def _linear_equivalent(model):
+    """The linear model whose variational equations are `model`'s along a solution that never
+    enters the backlash dead zone (`model` itself if linear), or ``None``.
 
-    Linear models: exact monodromy (:func:`hbgear.stability.multipliers_linear`, per mesh period,
-    raised to ``nu``), batched; otherwise Hill's method per point. NaN where unavailable.
+    The backlash contact law ``g(x)`` is piecewise linear with slope 1 outside ``|x| <= b``, so
+    along a solution with ``|delta - eps| > b`` throughout, the linearisation is exactly that of
+    the same model with ``contact = "linear"`` -- and its exact monodromy applies.
     """
-    values = np.full(len(branch), np.nan)
-    stable = np.full(len(branch), np.nan)
-    try:
-        from ..stability import hill_multipliers, is_stable, multipliers_linear
-    except ImportError as exc:  # not there yet: NaN columns and a warning
-        return values, stable, None, f"Floquet multipliers not computed: hbgear.stability unavailable ({exc})"
-    model = system.model
     if model.is_linear:
+        return model
+    if getattr(model, "contact", None) == "backlash":
+        linear = model.replace(contact="linear")
+        if linear.is_linear:
+            return linear
+    return None
+
+
+def _keeps_contact(model, hb, z, p) -> bool:
+    """True if the solution `z` (of `hb`, speed `p`) stays out of the backlash dead zone.
+
+    ``|delta - eps| > b`` on a dense grid (8 samples per harmonic, at least 1024 per base period),
+    with a margin of 1e-3 of the DTE peak-to-peak for the values between the samples.
+    """
+    if model.contact != "backlash":
+        return True
+    sol = PeriodicSolution.from_z(model, float(p), z, hb)
+    f = np.linspace(0.0, 1.0, max(1024, 8 * hb.harmonics * hb.nu), endpoint=False)
+    q, _ = sol.state_at(f)
+    eps, _ = model.static_transmission_error((f * hb.nu) % 1.0, model.speeds(float(p))[2], np)
+    x = np.asarray(q[0]) - np.asarray(eps)
+    return bool(np.min(np.abs(x)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(x)) + 1e-15)
+
+
+def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
+    """Floquet multipliers over the base period (``hb.nu`` mesh periods) at every point ``(p[i], z[i])``.
+
+    Exact monodromy (:func:`hbgear.stability.multipliers_linear` per mesh period, batched, raised
+    to ``nu``) for linear models and, for models whose only non-linearity is the backlash, at the
+    points that keep contact (:func:`_linear_equivalent`); Hill's method
+    (:func:`hbgear.stability.hill_multipliers`) at the others.
+
+    **Returns:** ``(multipliers, method, warning)``: a list of arrays (``None`` where it failed),
+    the method text and a warning (or ``None``).
+    **Raises:** `ImportError` if :mod:`hbgear.stability` is unavailable.
+    """
+    from ..stability import hill_multipliers, multipliers_linear
+
+    model = system.model
+    n = len(p)
+    out = [None] * n
+    linear = _linear_equivalent(model)
+    exact_idx, hill_idx = [], []
+    for i in range(n):
+        if linear is not None and (linear is model or _keeps_contact(model, hb, z[i], p[i])):
+            exact_idx.append(i)
+        else:
+            hill_idx.append(i)
+    fallback = None
+    if exact_idx:
         try:
-            for lo in range(0, len(branch), 256):
-                mult = np.asarray(multipliers_linear(model, np.asarray(branch.p[lo : lo + 256]))) ** hb.nu
-                for k, m in enumerate(mult):
-                    values[lo + k] = float(np.max(np.abs(m))) if m.size else 0.0
-                    stable[lo + k] = float(is_stable(m))
-            return values, stable, "exact monodromy (hbgear.stability.multipliers_linear)", None
+            idx = np.asarray(exact_idx)
+            for lo in range(0, len(idx), 256):
+                part = idx[lo : lo + 256]
+                mult = np.asarray(multipliers_linear(linear, np.asarray(p, dtype=float)[part])) ** hb.nu
+                for k, m in zip(part, mult):
+                    out[k] = m
         except Exception as exc:  # noqa: BLE001 -- fall back to Hill
             fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
-    else:
-        fallback = None
+            hill_idx = sorted(hill_idx + exact_idx)
+            exact_idx = []
     failures = []
-    indices = range(len(branch))
-    if progress is not False and (progress or sys.stderr.isatty()):
+    indices = hill_idx
+    if hill_idx and progress is not False and (progress or sys.stderr.isatty()):
         try:
             from tqdm.auto import tqdm
 
-            indices = tqdm(indices, desc="Floquet multipliers", leave=False, file=sys.stderr)
+            indices = tqdm(hill_idx, desc=label, leave=False, file=sys.stderr)
         except ImportError:  # pragma: no cover
             pass
     for i in indices:
         try:
-            multipliers = np.asarray(hill_multipliers(hb, jnp.asarray(branch.z[i]), float(branch.p[i]), system))
-            values[i] = float(np.max(np.abs(multipliers))) if multipliers.size else 0.0
-            stable[i] = float(is_stable(multipliers))
+            out[i] = np.asarray(hill_multipliers(hb, jnp.asarray(z[i]), float(p[i]), system))
         except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
-            failures.append(f"{rad_s_to_rpm(branch.p[i]):.6g} rpm: {type(exc).__name__}: {exc}")
+            failures.append(f"{rad_s_to_rpm(p[i]):.6g} rpm: {type(exc).__name__}: {exc}")
+    exact_text = "exact monodromy (hbgear.stability.multipliers_linear)"
+    hill_text = "Hill's method (hbgear.stability.hill_multipliers)"
+    if not hill_idx:
+        method = exact_text
+    elif not exact_idx:
+        method = hill_text
+    else:
+        method = (f"{exact_text} at the {len(exact_idx)} points that keep contact (the backlash model is "
+                  f"linear there), {hill_text} at the {len(hill_idx)} others")
     warning = fallback
     if failures:
         warning = ((fallback + "; ") if fallback else "") + (
             f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
-    return values, stable, "Hill's method (hbgear.stability.hill_multipliers)", warning
+    return out, method, warning
 
 
-def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title):
-    """Figure: DTE RMS and peak-to-peak against speed; unstable points (red) and folds marked."""
+def _floquet(hb, system, branch, progress):
+    """``(max |multiplier| per point over the base period, stable per point, method, warning, multipliers)``.
+
+    See :func:`_multipliers`; NaN (and ``None`` multipliers) where unavailable.
+    """
+    values = np.full(len(branch), np.nan)
+    stable = np.full(len(branch), np.nan)
+    try:
+        from ..stability import is_stable
+        multipliers, method, warning = _multipliers(hb, system, np.asarray(branch.p), np.asarray(branch.z), progress)
+    except ImportError as exc:  # not there yet: NaN columns and a warning
+        return values, stable, None, f"Floquet multipliers not computed: hbgear.stability unavailable ({exc})", \
+            [None] * len(branch)
+    for i, m in enumerate(multipliers):
+        if m is not None:
+            values[i] = float(np.max(np.abs(m))) if m.size else 0.0
+            stable[i] = float(is_stable(m))
+    return values, stable, method, warning, multipliers
+
+
+# ============================================================================ period doubling
+
+#: Default rule (``--period-doubling`` / ``--no-period-doubling`` override it): the -1 crossings
+#: of a ``nu = 1`` curve are always located and listed in frc.json; their ``nu = 2`` branches are
+#: followed when the model is non-linear and the ``nu = 2`` problem has at most this many unknowns,
+#: ``ndof (4 H + 1)`` (its basis has ``H2 = 2 H`` harmonics of ``w_m / 2``). Each ``nu = 2`` point
+#: costs a Jacobian of that size per Newton step and, where the teeth separate, a Hill eigenproblem
+#: of twice that size: measured on 2 cores ~0.02 s at 65 unknowns, ~0.2 s at 194, ~0.9 s at 386,
+#: so at the limit a branch of ~100 points costs about as much as the ``nu = 1`` curve's stability.
+#: (A linear model has no bounded ``nu = 2`` branch: its crossings are located, never followed.)
+PD_AUTO_MAX_UNKNOWNS = 200
+
+
+def period_doubling_enabled(config, args, model, harmonics, nu) -> tuple[bool, bool, str]:
+    """``(locate the crossings?, follow the nu = 2 branches?, why)``.
+
+    From ``--no-period-doubling`` / ``--period-doubling``, else the config key
+    ``sweep.period_doubling`` (``true`` / ``false`` / ``"auto"``, when the config has it), else the
+    rule of :data:`PD_AUTO_MAX_UNKNOWNS`. Only ``nu = 1`` curves are searched.
+    """
+    if nu != 1:
+        return False, False, f"period doublings are only looked for on nu = 1 curves (this one has nu = {nu})"
+    flag, source = getattr(args, "period_doubling", None), "--period-doubling / --no-period-doubling"
+    if flag is None:
+        flag, source = getattr(config.sweep, "period_doubling", None), "sweep.period_doubling"
+        if isinstance(flag, str):
+            flag = None if flag.strip().lower() == "auto" else flag.strip().lower() in ("true", "on", "yes", "1")
+    if flag is False:
+        return False, False, f"off ({source})"
+    if model.is_linear:
+        return True, False, ("crossings located; a linear model has no bounded nu = 2 branch to follow "
+                             "(the response grows without bound inside the instability tongue)")
+    if flag:
+        return True, True, f"on ({source})"
+    unknowns = model.ndof * (4 * harmonics + 1)
+    if unknowns <= PD_AUTO_MAX_UNKNOWNS:
+        return True, True, f"auto: on (nu = 2 problem of {unknowns} <= {PD_AUTO_MAX_UNKNOWNS} unknowns)"
+    return True, False, (f"auto: crossings located, nu = 2 branches not followed (nu = 2 problem of {unknowns} > "
+                         f"{PD_AUTO_MAX_UNKNOWNS} unknowns; --period-doubling to force)")
+
+
+def _pd_flags(multipliers) -> np.ndarray:
+    """Per point: 1.0 if a real multiplier lies below -1 (:func:`hbgear.stability.period_doubling`), 0.0 if
+    not, NaN if unknown."""
+    from ..stability import period_doubling
+
+    return np.array([np.nan if m is None else float(period_doubling(m)) for m in multipliers])
+
+
+def _pd_multiplier(model, hb, sol) -> float:
+    """Most negative real multiplier per mesh period of the ``nu = 1`` solution `sol`: exact
+    monodromy where :func:`_linear_equivalent` applies, the variational equations otherwise."""
+    from ..bifurcation import period_doubling_multiplier
+
+    linear = _linear_equivalent(model)
+    if linear is not None and (linear is model or _keeps_contact(model, hb, sol.z, sol.omega_pinion)):
+        return period_doubling_multiplier(linear, sol)
+    return period_doubling_multiplier(model, sol)
+
+
+def _locate_on_segment(model, hb, branch, i, harmonics, samples, tolerance, max_iterations,
+                       speed_tolerance=1e-7, max_steps=40):
+    """The -1 crossing between continuation points ``i`` and ``i+1`` (Illinois regula falsi on
+    ``mu + 1`` in speed, each ``nu = 1`` solve started from the straight line between the two points,
+    so it stays on this branch even where the curve is multivalued).
+
+    **Returns:** :class:`hbgear.bifurcation.PeriodDoublingPoint`, or ``None`` with the reason if the
+    exact multipliers do not confirm the crossing.
+    """
+    from ..bifurcation import PeriodDoublingPoint
+
+    pa, pb = float(branch.p[i]), float(branch.p[i + 1])
+    za, zb = np.asarray(branch.z[i]), np.asarray(branch.z[i + 1])
+
+    def g(w):
+        t = 0.0 if pb == pa else (w - pa) / (pb - pa)
+        sol = solve_periodic(model, w, harmonics=harmonics, nu=1, samples=samples, tolerance=tolerance,
+                             max_iterations=max_iterations, z0=(1 - t) * za + t * zb)
+        mu = _pd_multiplier(model, hb, sol)
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), sol, mu
+
+    ga, sa, ma = g(pa)
+    gb, sb, mb = g(pb)
+    if ga * gb > 0:
+        return None, (f"the multipliers flagged a crossing between {rad_s_to_rpm(pa):.6g} and {rad_s_to_rpm(pb):.6g} rpm "
+                      f"that the exact/variational monodromy does not confirm (most negative real multipliers "
+                      f"{ma:.6g}, {mb:.6g})")
+    a, b = pa, pb
+    best = (a, sa, ma, ga) if abs(ga) < abs(gb) else (b, sb, mb, gb)
+    side = 0
+    for _ in range(max_steps):
+        if abs(b - a) <= speed_tolerance * max(abs(a), abs(b)) or best[3] == 0:
+            break
+        c = (a * gb - b * ga) / (gb - ga)
+        gc, sc, mc = g(c)
+        if abs(gc) <= abs(best[3]):
+            best = (c, sc, mc, gc)
+        if gc * ga > 0:
+            a, ga = c, gc
+            if side == -1:
+                gb *= 0.5
+            side = -1
+        else:
+            b, gb = c, gc
+            if side == 1:
+                ga *= 0.5
+            side = 1
+    w, sol, mu, _ = best
+    return PeriodDoublingPoint(float(w), rad_s_to_rpm(float(w)), sol, float(mu),
+                               (rad_s_to_rpm(pa), rad_s_to_rpm(pb))), None
+
+
+def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samples2, tolerance=1e-9,
+                           max_points=400, amplitude=0.02, max_amplitude=100.0, progress=None):
+    r"""Follow the ``nu = 2`` branch born at `point` while it stays in ``[omega_lo, omega_hi]``.
+
+    As :func:`hbgear.bifurcation.continue_period_doubled`: continuation in the half-order amplitude
+    ``a = phi . (z - z_*)`` with the speed as an unknown (regular at the bifurcation whether the
+    branch is vertical, super- or subcritical), from `amplitude` up to `max_amplitude` static
+    deflections. It ends
+
+    - ``"reached sweep end"``: the speed left the range; the last leg is an arclength continuation
+      in speed that stops exactly at that end of the range;
+    - ``"reconnected"``: the amplitude went back to zero (the branch rejoins the ``nu = 1`` curve,
+      at another period doubling);
+    - ``"max amplitude"``: the half-order amplitude reached `max_amplitude` (an unbounded branch);
+    - ``"failed"``: the continuation could not go on (or `max_points`), message from it.
+
+    **Returns:** ``(omega (n,), z (n, size), residual (n,), hb2, status, message)``.
+    """
+    from ..bifurcation import embed_subharmonic, half_order_mode
+
+    sol = point.solution
+    hb2 = HarmonicBalance(model.ndof, harmonics2, 2, samples2)
+    system = GearSystem(model)
+    z_star = embed_subharmonic(sol.z, model.ndof, sol.harmonics, harmonics2)
+    w_star = float(point.omega)
+    phi, _ = half_order_mode(hb2, z_star, w_star, system)
+    offset = float(phi @ z_star)
+
+    def both(y, a):
+        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
+        r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+        top = np.hstack([np.asarray(jz, dtype=float), w_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
+        jac = np.vstack([top, np.append(phi, 0.0)])
+        jpar = np.zeros(len(r))
+        jpar[-1] = -1.0
+        return r, jac, jpar
+
+    def resid(y, a):
+        r = hb2.residual(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
+        return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+
+    def outside(w):
+        return w < omega_lo or w > omega_hi
+
+    method = PseudoArclength(ds=0.02, ds_min=1e-8, ds_max=0.25, max_angle_deg=5.0, parameter_scale=max_amplitude)
+    y0 = np.append(z_star + amplitude * phi, 1.0)
+    leg = continuation(both, resid, y0, amplitude, max_amplitude, method, max_points=max_points,
+                       tolerance=tolerance, callback=lambda a, y: outside(float(y[-1]) * w_star), progress=progress)
+    omega = np.asarray(leg.z)[:, -1] * w_star if len(leg) else np.zeros(0)
+    zs = np.asarray(leg.z)[:, :-1] if len(leg) else np.zeros((0, hb2.size))
+    res = np.asarray(leg.residual)
+    if leg.status == Status.STOPPED and len(omega) >= 2:
+        end = omega_lo if omega[-1] < omega_lo else omega_hi
+        k = len(omega) - 2  # the last point inside the range
+        both_p, resid_p = gear_residual_functions(hb2, system)
+        last = continuation(both_p, resid_p, zs[k], float(omega[k]), end, frc_method(w_star, end),
+                            max_points=max_points, tolerance=tolerance)
+        omega = np.concatenate([omega[: k + 1], np.asarray(last.p)[1:]])
+        zs = np.concatenate([zs[: k + 1], np.asarray(last.z)[1:]])
+        res = np.concatenate([res[: k + 1], np.asarray(last.residual)[1:]])
+        if last.success:
+            return omega, zs, res, hb2, "reached sweep end", f"reached {rad_s_to_rpm(end):.6g} rpm"
+        return omega, zs, res, hb2, "failed", (f"last leg in speed towards {rad_s_to_rpm(end):.6g} rpm stopped at "
+                                               f"{rad_s_to_rpm(omega[-1]):.6g} rpm: {last.message}")
+    if leg.status == Status.TURNED_BACK:
+        return omega, zs, res, hb2, "reconnected", (
+            f"the half-order amplitude went back to zero near {rad_s_to_rpm(omega[-1]):.6g} rpm: the branch rejoins "
+            "the nu = 1 curve there")
+    if leg.status == Status.SUCCESS:
+        return omega, zs, res, hb2, "max amplitude", (
+            f"half-order amplitude reached {max_amplitude:g} static deflections at {rad_s_to_rpm(omega[-1]):.6g} rpm "
+            "without leaving the sweep range (unbounded branch?)")
+    return omega, zs, res, hb2, "failed", f"{leg.status.name}: {leg.message}"
+
+
+def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, samples, config, follow, sweep_rpm,
+                     progress):
+    """Locate the -1 crossings along the ``nu = 1`` curve and follow their ``nu = 2`` branches.
+
+    **Returns:** ``(records for frc.json, rows for frc.csv, plot data per branch)``.
+    """
+    from ..stability import is_stable
+
+    so, sw = config.solver, config.sweep
+    flags = _pd_flags(multipliers)
+    candidates = [i for i in range(len(flags) - 1)
+                  if np.isfinite(flags[i]) and np.isfinite(flags[i + 1]) and flags[i] != flags[i + 1]]
+    omega_lo, omega_hi = (rpm_to_rad_s(min(sweep_rpm)), rpm_to_rad_s(max(sweep_rpm)))
+    records, rows, curves = [], [], []
+    ends = []  # speeds where followed branches rejoined the nu = 1 curve
+    h2, samples2 = 2 * harmonics, 2 * samples
+    for i in candidates:
+        t0 = time.perf_counter()
+        rec = {"bracket_rpm": [float(rad_s_to_rpm(branch.p[i])), float(rad_s_to_rpm(branch.p[i + 1]))],
+               "bracket_rows": [i, i + 1],
+               "unstable_side": "below" if (flags[i] > flags[i + 1]) == (branch.p[i] < branch.p[i + 1]) else "above"}
+        try:
+            point, why = _locate_on_segment(model, hb, branch, i, harmonics, samples, so.tolerance, so.max_iterations)
+        except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+            point, why = None, f"locating the crossing failed: {type(exc).__name__}: {exc}"
+        if point is None:
+            rec.update(status="not confirmed" if why.startswith("the multipliers") else "failed", message=why,
+                       points=0, time_s=time.perf_counter() - t0)
+            records.append(rec)
+            continue
+        rec.update(speed_rpm=float(point.speed_rpm), mesh_freq_hz=float(point.omega * model.teeth_pinion / (2 * math.pi)),
+                   multiplier=float(point.multiplier))
+        joined = [e for e in ends if abs(e - point.omega) <= 5e-3 * point.omega]
+        if model.is_linear:
+            rec.update(status="not followed", points=0,
+                       message="linear model: the nu = 2 branch is vertical and unbounded at the crossing "
+                       "(a parametric instability), nothing to follow")
+        elif not follow:
+            rec.update(status="not followed", points=0, message="nu = 2 branches not followed here (see "
+                       "period_doubling_rule; --period-doubling forces it)")
+        elif joined:
+            rec.update(status="joined", points=0, message="the nu = 2 branch of an earlier crossing rejoins the "
+                       "nu = 1 curve here; not followed twice")
+        else:
+            try:
+                omega, zs, res, hb2, status, message = follow_period_doubling(
+                    model, point, omega_lo, omega_hi, harmonics2=h2, samples2=samples2, tolerance=so.tolerance,
+                    max_points=sw.max_points, progress=progress)
+            except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+                omega, zs, res, hb2 = np.zeros(0), None, None, None
+                status, message = "failed", f"branch switching failed: {type(exc).__name__}: {exc}"
+            if status == "reconnected" and len(omega):
+                ends.append(float(omega[-1]))
+            t_follow = time.perf_counter()
+            block = []
+            if len(omega):
+                system2 = GearSystem(model)
+                try:
+                    mults, method2, warning2 = _multipliers(hb2, system2, omega, zs, progress,
+                                                            label="Floquet multipliers (nu = 2)")
+                except ImportError:
+                    mults, method2, warning2 = [None] * len(omega), None, "hbgear.stability unavailable"
+                for w, z, r, m in zip(omega, zs, res, mults):
+                    summ = PeriodicSolution.from_z(model, float(w), z, hb2).summary()
+                    floq = np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0)
+                    st = np.nan if m is None else int(is_stable(m))
+                    block.append([float(rad_s_to_rpm(w)), float(w) * model.teeth_pinion / (2 * math.pi),
+                                  summ["dte_mean_um"], summ["dte_rms_um"], summ["dte_p2p_um"], summ["dynamic_factor"],
+                                  floq, st, 2, float(r)])
+                rec.update(stability_method=method2, stability_warning=warning2)
+            arr = np.array([b[:8] for b in block], dtype=float).reshape(len(block), 8)
+            rec.update(
+                status=status, message=message, points=len(block), harmonics=h2, time_samples=samples2,
+                first_row=len(branch) + len(rows),
+                speed_rpm_range=[float(arr[:, 0].min()), float(arr[:, 0].max())] if len(block) else None,
+                dte_p2p_um_range=[float(arr[:, 4].min()), float(arr[:, 4].max())] if len(block) else None,
+                unstable_points=int(np.sum(arr[:, 7] == 0)) if len(block) else 0,
+                stability_time_s=time.perf_counter() - t_follow,
+            )
+            rows.extend(block)
+            if block:
+                curves.append(arr)
+        rec["time_s"] = time.perf_counter() - t0
+        records.append(rec)
+    return records, rows, curves
+
+
+def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title, subharmonic=(), pd_points=()):
+    """Figure: DTE RMS and peak-to-peak against speed; unstable points (red) and folds marked.
+
+    `subharmonic`: ``nu = 2`` branches, arrays of frc.csv rows (columns as :data:`COLUMNS`, first 8),
+    drawn in another colour; `pd_points`: ``(speed_rpm, rms_um, p2p_um)`` of located period doublings.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 6.5))
     axes = fig.subplots(2, 1, sharex=True)
     unstable = stable == 0
-    for ax, values, label in ((axes[0], rms_um, "DTE RMS [um]"), (axes[1], p2p_um, "DTE peak-to-peak [um]")):
-        ax.plot(speed_rpm, values, color="k", lw=1.0, label="HB continuation")
+    for ax, col, values, label in ((axes[0], 3, rms_um, "DTE RMS [um]"), (axes[1], 4, p2p_um, "DTE peak-to-peak [um]")):
+        ax.plot(speed_rpm, values, color="k", lw=1.0, label="HB continuation (nu = 1)")
         if np.any(unstable):
             ax.plot(speed_rpm[unstable], values[unstable], "o", ms=3, color="tab:red", label="unstable")
         if len(fold_rows):
             ax.plot(speed_rpm[fold_rows], values[fold_rows], "D", ms=6, mfc="none", color="tab:blue", label="fold")
+        for k, rows in enumerate(subharmonic):
+            ax.plot(rows[:, 0], rows[:, col], color="tab:green", lw=1.2,
+                    label="period-doubled branch (nu = 2)" if k == 0 else None)
+            bad = rows[:, 7] == 0
+            if np.any(bad):
+                ax.plot(rows[bad, 0], rows[bad, col], "x", ms=4, color="tab:red",
+                        label="unstable (nu = 2)" if k == 0 else None)
+        if len(pd_points):
+            pts = np.asarray(pd_points, dtype=float).reshape(-1, 3)
+            ax.plot(pts[:, 0], pts[:, col - 2], "s", ms=6, mfc="none", color="tab:purple", label="period doubling")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, loc="upper left")
@@ -209,9 +593,20 @@ def run(config, args, out_dir) -> int:
     if getattr(args, "no_stability", False):
         floquet, stable = np.full(len(branch), np.nan), np.full(len(branch), np.nan)
         stability_method, stability_warning = None, "Floquet multipliers skipped (--no-stability)"
+        multipliers = [None] * len(branch)
     else:
-        floquet, stable, stability_method, stability_warning = _floquet(hb, system, branch, progress)
+        floquet, stable, stability_method, stability_warning, multipliers = _floquet(hb, system, branch, progress)
     t_stab = clock()
+
+    look, follow, pd_rule = period_doubling_enabled(config, args, model, harmonics, nu)
+    pd_records, pd_rows, pd_curves = [], [], []
+    if look and all(m is None for m in multipliers):
+        pd_rule = "period doublings not looked for: no Floquet multipliers (--no-stability or unavailable)"
+    elif look:
+        pd_records, pd_rows, pd_curves = _period_doubling(
+            model, hb, system, branch, multipliers, harmonics=harmonics, samples=samples, config=config,
+            follow=follow, sweep_rpm=(sw.speed_rpm_start, sw.speed_rpm_stop), progress=progress)
+    t_pd = clock()
 
     speed_rpm = rad_s_to_rpm(np.asarray(branch.p))
     speed_rpm[0] = sw.speed_rpm_start  # exact ends (no rpm -> rad/s -> rpm rounding)
@@ -235,7 +630,10 @@ def run(config, args, out_dir) -> int:
     for row in rows:
         if not math.isnan(row[7]):
             row[7] = int(row[7])
-    write_csv_atomic(out_dir / "frc.csv", COLUMNS, rows)
+    for row in pd_rows:
+        if not math.isnan(row[7]):
+            row[7] = int(row[7])
+    write_csv_atomic(out_dir / "frc.csv", COLUMNS, rows + pd_rows)
 
     folds = branch.folds
     fold_info = [
@@ -245,8 +643,15 @@ def run(config, args, out_dir) -> int:
         for i in folds
     ]
     title = (f"{model.coupling} {model.formulation}, {model.boundary}, H={harmonics}, nu={nu}: "
-             f"{len(branch)} points, {len(folds)} folds" + ("" if branch.success else f" [{branch.status.name}]"))
-    fig = plot_frc(speed_rpm, table[:, 3], table[:, 4], stable, folds, title)
+             f"{len(branch)} points, {len(folds)} folds" + ("" if branch.success else f" [{branch.status.name}]")
+             + (f", {len(pd_curves)} nu=2 branch(es)" if pd_curves else ""))
+    pd_points = []
+    for rec in pd_records:
+        if "speed_rpm" in rec:
+            j = rec["bracket_rows"][0]
+            sol = PeriodicSolution.from_z(model, rpm_to_rad_s(rec["speed_rpm"]), branch.z[j], hb).summary()
+            pd_points.append((rec["speed_rpm"], sol["dte_rms_um"], sol["dte_p2p_um"]))
+    fig = plot_frc(speed_rpm, table[:, 3], table[:, 4], stable, folds, title, pd_curves, pd_points)
     save_figure_atomic(fig, out_dir / "frc.png", dpi=120)
     t_out = clock()
 
@@ -280,6 +685,8 @@ def run(config, args, out_dir) -> int:
             "max_abs_floquet is over the base period (nu mesh periods)",
             "unstable_points": int(np.sum(stable == 0)),
         },
+        "period_doubling_rule": pd_rule,
+        "period_doubling": pd_records,
         "continuation": asdict(method) | {"method": "pseudo-arclength", "parameter": "pinion speed [rad/s]"},
         "model": {"coupling": model.coupling, "formulation": model.formulation, "boundary": model.boundary,
                   "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof},
@@ -289,7 +696,8 @@ def run(config, args, out_dir) -> int:
             "continuation": t_cont - t_compile,
             "per_point_ms": 1e3 * (t_cont - t_compile) / n_steps,
             "stability": t_stab - t_cont,
-            "outputs": t_out - t_stab,
+            "period_doubling": t_pd - t_stab,
+            "outputs": t_out - t_pd,
             "total": clock() - t0,
         },
         "config": config.to_dict(),
@@ -301,12 +709,18 @@ def run(config, args, out_dir) -> int:
             f"stopped at {speed_rpm[-1]:.6g} rpm: {branch.message}. The partial curve ({len(branch)} points) was "
             f"written to {out_dir / 'frc.csv'} with the status in frc.json"
         )
+    for r in pd_records:
+        if r["status"] == "failed":
+            print(f"frc: warning: period doubling near {r.get('speed_rpm', r['bracket_rpm'][0]):.6g} rpm: "
+                  f"{r['message']} (nu = 1 curve and frc.json written)", file=sys.stderr)
     peak = summary["peak"]
+    pd_text = "".join(f"period doubling at {r['speed_rpm']:.6g} rpm, nu = 2 branch {r['status']} ({r['points']} points); "
+                      for r in pd_records if "speed_rpm" in r)
     print(
         f"frc: {len(branch)} points from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={harmonics}, nu={nu}); "
         f"peak DTE p2p {peak['dte_p2p_um']:.4g} um at {peak['speed_rpm']:.6g} rpm; "
         f"{len(summary['fold_speeds_rpm'])} folds; {summary['stability']['unstable_points']} unstable points; "
-        f"{summary['timings_s']['total']:.1f} s -> {out_dir}"
+        f"{pd_text}{summary['timings_s']['total']:.1f} s -> {out_dir}"
     )
     return 0
 

@@ -1,0 +1,132 @@
+"""`hbgear frc` follows period-doubled (nu = 2) branches (hbgear.commands.frc).
+
+The backlash pair of ``examples/backlash.toml`` reduced to the DTE alone (boundary "torques",
+no friction, zeta 0.05), swept 29,000 -> 27,000 rpm with H = 8: the upper edge of the
+parametric tongue (a multiplier crosses -1 at ~28,190 rpm) lies inside the sweep, the nu = 1
+solution below it is unstable, and the period-doubled branch (bounded by contact loss) exists
+down to the end of the sweep. Its DTE is checked against time integration (an independent route)
+and against an independent nu = 2 harmonic-balance solve.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hbgear.bifurcation import embed_subharmonic, half_order_indices, solve_period_doubled
+from hbgear.build import build_model
+from hbgear.cli import main
+from hbgear.commands.frc import COLUMNS, PD_AUTO_MAX_UNKNOWNS, period_doubling_enabled
+from hbgear.config import load_config
+from hbgear.simulate import simulate
+from hbgear.solve import rpm_to_rad_s, solve_periodic
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "backlash.toml"
+SETS = ['boundary.output="torques"', "solver.harmonics=8", "solver.time_samples=256",
+        "sweep.speed_rpm_start=29000", "sweep.speed_rpm_stop=27000"]
+
+
+def _run(out, *extra):
+    argv = ["frc", str(EXAMPLE), "--out", str(out), "--no-progress"]
+    for s in SETS:
+        argv += ["--set", s]
+    assert main(argv + list(extra)) == 0
+    with open(out / "frc.csv", newline="") as f:
+        rows = list(csv.reader(line for line in f if not line.startswith("#")))
+    header, body = rows[0], np.array([[float(x) for x in r] for r in rows[1:]])
+    return header, body, json.loads((out / "frc.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def frc(tmp_path_factory):
+    return _run(tmp_path_factory.mktemp("frc_pd"))
+
+
+def test_nu2_branch_rows_and_record(frc):
+    header, body, summary = frc
+    assert tuple(header) == COLUMNS
+    nu = body[:, COLUMNS.index("nu")]
+    n1 = int(np.sum(nu == 1))
+    assert n1 > 20 and np.all(nu[:n1] == 1) and np.all(nu[n1:] == 2)  # nu = 2 rows after the nu = 1 rows
+    assert summary["points"] == n1
+
+    records = summary["period_doubling"]
+    assert len(records) == 1, records
+    rec = records[0]
+    assert 28100.0 < rec["speed_rpm"] < 28300.0
+    assert rec["multiplier"] == pytest.approx(-1.0, abs=1e-4)
+    assert rec["unstable_side"] == "below"
+    assert rec["status"] == "reached sweep end", rec["message"]
+    assert rec["points"] == len(body) - n1 and rec["first_row"] == n1
+
+    two = body[n1:]
+    speed2 = two[:, 0]
+    assert speed2[-1] == pytest.approx(27000.0, abs=1e-6)  # followed to the end of the sweep
+    assert np.all((speed2 >= 27000.0 - 1e-6) & (speed2 <= rec["speed_rpm"] + 20.0))
+    assert np.all(two[:, COLUMNS.index("residual")] < 1e-8)
+    # the branch grows away from the nu = 1 curve: at 27,000 rpm the teeth separate
+    p2p = COLUMNS.index("dte_p2p_um")
+    one_end = body[:n1][np.argmin(np.abs(body[:n1, 0] - 27000.0)), p2p]
+    assert two[-1, p2p] > 10.0 * one_end
+    # where the teeth separate the nu = 2 branch is the attractor (TI below converges to it)
+    far = speed2 < rec["speed_rpm"] - 200.0
+    assert np.any(far) and np.all(two[far, COLUMNS.index("stable")] == 1)
+
+
+def test_nu1_unstable_below_the_crossing(frc):
+    _, body, summary = frc
+    rec = summary["period_doubling"][0]
+    one = body[body[:, COLUMNS.index("nu")] == 1]
+    stable = one[:, COLUMNS.index("stable")]
+    floq = one[:, COLUMNS.index("max_abs_floquet")]
+    below = one[:, 0] < rec["speed_rpm"] - 5.0
+    above = one[:, 0] > rec["speed_rpm"] + 5.0
+    assert np.sum(below) > 10 and np.sum(above) > 10
+    assert np.all(stable[below] == 0) and np.all(floq[below] > 1.0)
+    assert np.all(stable[above] == 1)
+
+
+def test_nu2_dte_matches_time_integration_and_independent_hb(frc):
+    _, body, summary = frc
+    two = body[body[:, COLUMNS.index("nu")] == 2]
+    row = two[-1]
+    assert row[0] == pytest.approx(27000.0)
+    p2p, rms = row[COLUMNS.index("dte_p2p_um")], row[COLUMNS.index("dte_rms_um")]
+
+    model = build_model(load_config(EXAMPLE, ['boundary.output="torques"']))
+    omega = rpm_to_rad_s(27000.0)
+    ti = simulate(model, omega, max_cycles=1500, rtol=1e-8, steady_tolerance=1e-6)
+    assert ti.period_cycles == 2
+    assert p2p == pytest.approx(ti.summary["dte_p2p_um"], rel=0.01)
+    assert rms == pytest.approx(ti.summary["dte_rms_um"], rel=0.01)
+
+    # independent nu = 2 solve: from the embedded nu = 1 solution plus a half-order kick
+    sol1 = solve_periodic(model, omega, harmonics=8, samples=256)
+    z0 = embed_subharmonic(sol1.z, model.ndof, 8, 16)
+    z0[half_order_indices(model.ndof, 16)[:2]] = 2.0
+    hb2 = solve_period_doubled(model, omega, z0, harmonics=16, samples=512).summary()
+    assert p2p == pytest.approx(hb2["dte_p2p_um"], rel=0.01)
+
+
+def test_switch_off_and_cost_rule(tmp_path):
+    _, body, summary = _run(tmp_path, "--no-period-doubling")
+    assert np.all(body[:, COLUMNS.index("nu")] == 1)
+    assert summary["period_doubling"] == [] and "off" in summary["period_doubling_rule"]
+
+    cfg = load_config(EXAMPLE, [])  # spring boundary: ndof 2
+    model = build_model(cfg)
+    args = SimpleNamespace(period_doubling=None)
+    h_max = (PD_AUTO_MAX_UNKNOWNS // model.ndof - 1) // 4
+    assert period_doubling_enabled(cfg, args, model, h_max, 1)[:2] == (True, True)
+    assert period_doubling_enabled(cfg, args, model, h_max + 1, 1)[:2] == (True, False)
+    assert period_doubling_enabled(cfg, SimpleNamespace(period_doubling=True), model, 99, 1)[:2] == (True, True)
+    assert period_doubling_enabled(cfg, args, model, 8, 2)[:2] == (False, False)
+    linear = model.replace(contact="linear")
+    assert period_doubling_enabled(cfg, args, linear, 8, 1)[:2] == (True, False)
+    assert not math.isnan(h_max)
