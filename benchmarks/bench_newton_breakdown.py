@@ -139,7 +139,7 @@ def prototypes(model, hb, system):
 
     w = rpm_to_rad_s(13000.0)
     z = jnp.asarray(solve_periodic(model, w, harmonics=H, samples=SAMPLES, tolerance=TOL).z)
-    quad = hb.quadrature(system)
+    quad = hb.quadrature(system)[:3] + (None,)  # the full construction (no frozen blocks), as before the caching
     n, B = hb.ndof, hb.block
     xs, fs = system.displacement_scale, system.force_scale
     out = {}

@@ -4,7 +4,8 @@
 
 Writes validation/out/fig14_ltv_nltv_ratio.png and validation/out/fig14_ltv_nltv_ratio.md.
 Reference pair (``examples/paper_table1.toml``: soft output spring, Coulomb mu0 = 0.1,
-formulation A, zeta = 0.01), k_max and k_min held as Gamma varies. Both models by harmonic
+formulation A, zeta = 0.001 as in the paper's Fig. 12 by default; ``--zeta 0.01`` for the
+previous run), k_max and k_min held as Gamma varies. Both models by harmonic
 balance (nu = 1) on a coarse grid, the NLTV solution continued along speed; where the LTV
 model is unstable (exact monodromy) its steady response does not exist and the ratio is
 marked infinite, as the paper's gamma > 100 contours do.
@@ -57,7 +58,7 @@ def ratio_map(speeds_rpm, ratios, *, harmonics: int = 32, samples: int = 256, ze
     return ratio, p_ltv, p_nl, mult
 
 
-def main(speeds=np.arange(6000.0, 32001.0, 1000.0), ratios=np.array([1.35, 1.45, 1.55, 1.65])):
+def main(speeds=np.arange(6000.0, 32001.0, 500.0), ratios=np.array([1.35, 1.45, 1.55, 1.65]), zeta: float = 0.001):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -65,7 +66,7 @@ def main(speeds=np.arange(6000.0, 32001.0, 1000.0), ratios=np.array([1.35, 1.45,
 
     OUT.mkdir(exist_ok=True)
     t0 = time.perf_counter()
-    ratio, p_ltv, p_nl, mult = ratio_map(speeds, ratios)
+    ratio, p_ltv, p_nl, mult = ratio_map(speeds, ratios, zeta=zeta)
     elapsed = time.perf_counter() - t0
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
@@ -98,33 +99,62 @@ def main(speeds=np.arange(6000.0, 32001.0, 1000.0), ratios=np.array([1.35, 1.45,
         for i, g in enumerate(ratios)
     )
     unstable = ", ".join(f"{speeds[j]:.0f}@{ratios[i]:.2f}" for i, j in zip(ii, jj))
+    # finite ratios next to an LTV-unstable grid point (same Gamma, neighbouring speed) vs the rest
+    near = np.zeros(ratio.shape, bool)
+    for i, j in zip(ii, jj):
+        for jn in (j - 1, j + 1):
+            if 0 <= jn < len(speeds) and np.isfinite(ratio[i, jn]):
+                near[i, jn] = True
+    far = finite & ~near
+    near_txt = (f"{np.min(ratio[near]):.3f} - {np.max(ratio[near]):.3f} ({int(near.sum())} points)"
+                if near.any() else "none (no finite point next to an unstable one)")
+    far_txt = f"{np.min(ratio[far]):.3f} - {np.max(ratio[far]):.3f} ({int(far.sum())} points)" if far.any() else "none"
+    n_big = int(np.sum(finite & (ratio > 100.0)))
+    dev = np.abs(np.where(finite, ratio, np.nan) - 1.0)
     text = f"""# Fig. 14 in kind: LTV / NLTV peak-to-peak DTE
 
 Script `validation/fig14_ltv_nltv_ratio.py`; figure `fig14_ltv_nltv_ratio.png`.
-Grid {len(speeds)} speeds ({speeds[0]:.0f}-{speeds[-1]:.0f} rpm) x {len(ratios)} contact ratios;
-zeta = 0.01, Coulomb mu0 = 0.1 (NLTV regularised, v_reg = 5 mm/s), formulation A, soft
-spring; HB nu = 1, H = 32, N = 256; {elapsed:.0f} s in all.
+Grid {len(speeds)} speeds ({speeds[0]:.0f}-{speeds[-1]:.0f} rpm, step {speeds[1] - speeds[0]:.0f}) x
+{len(ratios)} contact ratios; zeta = {zeta:g}, Coulomb mu0 = 0.1 (NLTV regularised,
+v_reg = 5 mm/s), formulation A, soft spring; both models by HB, nu = 1, H = 32, N = 256;
+{elapsed:.0f} s in all.
 
 | Gamma | LTV-unstable grid points | finite ratio range | speed of the largest finite ratio [rpm] |
 |---|---|---|---|
 {rows}
 
-Largest finite ratio {ratio[k]:.3f} at {speeds[k[1]]:.0f} rpm, Gamma {ratios[k[0]]:.2f}
-(p2p LTV {p_ltv[k]:.3f} um, NLTV {p_nl[k]:.3f} um). LTV-unstable points (ratio infinite):
-{unstable or 'none'}. NLTV HB failed at {int(np.sum(np.isnan(p_nl)))} point(s).
+What the numbers show:
+- Finite ratios (LTV stable): {np.nanmin(np.where(finite, ratio, np.nan)):.3f} - {ratio[k]:.3f}; largest at
+  {speeds[k[1]]:.0f} rpm, Gamma {ratios[k[0]]:.2f} (p2p LTV {p_ltv[k]:.3f} um, NLTV {p_nl[k]:.3f} um);
+  {int(np.sum(dev <= 0.05))} of {int(finite.sum())} finite points lie within 5 % of 1.
+- Next to an LTV-unstable grid point: {near_txt}; elsewhere: {far_txt}.
+- Finite ratios above the paper's threshold 100: {n_big}.
+- LTV-unstable grid points (exact monodromy; ratio set to infinity, not computed):
+  {unstable or 'none'}.
+- NLTV HB did not converge at {int(np.sum(np.isnan(p_nl)))} point(s) (left blank).
 
 ## Agreement with the paper
 
-- Agrees: away from resonances and unstable zones the ratio is close to 1 (friction acts
-  mainly as an excitation, the paper's "nearly identical" LTV and NLTV responses); the ratio
-  departs from 1 near the primary resonance (~13,400 rpm), where the NLTV friction damps the
-  response, and is infinite across the LTV parametric zone around w_m = 2 w_n, whose position
-  moves with Gamma as in Fig. 13.
-- Differs: the grid is coarse (paper: dense contours from time integration), the ratio is
-  taken between steady periodic solutions by HB, and inside the LTV-unstable zone the NLTV
-  nu = 1 solution found by HB may itself be unstable (its Floquet multipliers are not mapped
-  here); the narrow high-order zones (as in Fig. 12, ~1470 rpm at zeta 0.001) fall between
-  the grid speeds at zeta 0.01 and are not resolved.
+- Agrees: where both models are stable and away from the zones the ratio is close to 1
+  (friction acts mainly as an excitation; the paper's "nearly identical" responses), and
+  the LTV-unstable points lie at w_m ~ 2 w_n and at its sub-/super-harmonic zones, moving
+  with Gamma as in Fig. 13.
+- Differs: the paper's contours reach gamma > 100 around the unstable zones, and its inner
+  contours mark NLTV-stabilised zones. A comparison of periodic HB solutions cannot show
+  that: (i) where the LTV model is unstable its periodic solution exists (HB finds it) but
+  is never reached, and the paper's gamma > 100 there is the ratio of an LTV *transient*
+  growing for the simulated time to a bounded NLTV response, i.e. a number set by the
+  integration length and the threshold, not a property of two steady states; (ii) just
+  outside the zones both periodic solutions are resonant through the same k(t) mechanism
+  and the NLTV friction changes their amplitude only by the small effective damping it adds
+  (see the numbers above), so the ratio of steady p2p stays O(1); the paper's large ratios
+  near the zone edges are also consistent with slowly decaying LTV transients at
+  zeta = 0.001 (multipliers just below 1) not having settled within the integration time.
+  (iii) The NLTV solutions are not checked for stability here; fig12_ltv_vs_nltv.md shows
+  that at the zone near 1490 rpm the NLTV nu = 1 solution is itself unstable over most of
+  the zone (formulation A: everywhere it was tested), so NLTV "stabilisation" is not
+  generic in this model. The grid (step {speeds[1] - speeds[0]:.0f} rpm) resolves only the wide
+  zones; the narrow high-order zones fall between grid speeds.
 """
     (OUT / "fig14_ltv_nltv_ratio.md").write_text(text)
     print(text)
@@ -132,4 +162,8 @@ Largest finite ratio {ratio[k]:.3f} at {speeds[k[1]]:.0f} rpm, Gamma {ratios[k[0
 
 
 if __name__ == "__main__":
-    main()
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--zeta", type=float, default=0.001, help="mesh damping ratio (default 0.001)")
+    main(zeta=parser.parse_args().zeta)

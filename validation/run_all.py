@@ -866,6 +866,64 @@ def check_fig13():
             "note": note + "\n\nScript: `validation/fig13_stability_map.py` (exact monodromy / Magnus)."}
 
 
+def _script(stem: str, module: str, **kwargs):
+    """Run a figure script's ``main`` quietly; copy its PNG; return ``(result, note)``."""
+    import importlib
+
+    mod = importlib.import_module(f"validation.{module}")
+    with contextlib.redirect_stdout(io.StringIO()):
+        result = mod.main(**kwargs)
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(HERE / "out" / f"{stem}.png", FIGURES / f"{stem}.png")
+    return result, _demote((HERE / "out" / f"{stem}.md").read_text())
+
+
+@check("fig12_ltv_nltv", "Fig. 12: near an unstable zone LTV diverges, NLTV stays bounded (where it does)", 300)
+def check_fig12():
+    result, note = _script("fig12_ltv_vs_nltv", "fig12_ltv_vs_nltv")
+    case = result["case"]
+    rows = [row("NLTV-A growth per cycle at the zone's most unstable speed (info)", result["rate_nltv_a"], None)]
+    if case is None:
+        rows.append(row("a bounded NLTV case in the zone was found", 0.0, 1.0, relation=">="))
+    else:
+        rows += [
+            row(f"LTV-{case['formulation']} growth per cycle vs its Floquet multiplier ({case['rpm']:.2f} rpm)",
+                abs(case["ltv_rate"] / case["m_ltv"] - 1), 0.01, percent=True),
+            row("NLTV bounded over the run (1 = yes)", float(case["bounded"]), 1.0, relation=">="),
+            row("NLTV p2p: HB vs last TI cycle", abs(case["rel_p2p"]), 0.01, percent=True),
+            row("NLTV RMS: HB vs last TI cycle", abs(case["rel_rms"]), 0.01, percent=True),
+        ]
+    return {"rows": rows, "figures": ["figures/fig12_ltv_vs_nltv.png"],
+            "note": note + "\n\nScript: `validation/fig12_ltv_vs_nltv.py` (TI, HB, exact and variational Floquet)."}
+
+
+@check("fig14_ratio", "Fig. 14: ratio of LTV to NLTV peak-to-peak DTE over speed x contact ratio", 40)
+def check_fig14():
+    ratio, note = _script("fig14_ltv_nltv_ratio", "fig14_ltv_nltv_ratio")
+    ratio = np.asarray(ratio, dtype=float)
+    finite = ratio[np.isfinite(ratio)]
+    rows = [
+        row("smallest finite LTV/NLTV ratio (info)", float(finite.min()), None),
+        row("largest finite LTV/NLTV ratio (info)", float(finite.max()), None),
+        row("grid points where LTV is unstable (ratio infinite) (info)", float(np.sum(np.isinf(ratio))), None, fmt=".0f"),
+        row("grid points where NLTV HB failed", float(np.sum(np.isnan(ratio))), 0.0, fmt=".0f"),
+    ]
+    return {"rows": rows, "figures": ["figures/fig14_ltv_nltv_ratio.png"],
+            "note": note + "\n\nScript: `validation/fig14_ltv_nltv_ratio.py` (HB, exact LTV multipliers)."}
+
+
+@check("backlash_frc", "Backlash: frequency-response curve through both folds vs up/down time-integration sweeps", 120)
+def check_backlash():
+    result, note = _script("backlash_frc", "backlash_frc")
+    (fold_lo, fold_hi), (down, up) = result["folds"], result["jumps"]
+    rows = [
+        row("jump-up speed: HB fold vs TI up-sweep", abs(fold_hi / up - 1), 0.01, percent=True),
+        row("jump-down speed: HB fold vs TI down-sweep", abs(fold_lo / down - 1), 0.01, percent=True),
+    ]
+    return {"rows": rows, "figures": ["figures/backlash_frc.png"],
+            "note": note + "\n\nScript: `validation/backlash_frc.py` (HB continuation, TI sweeps)."}
+
+
 # ============================================================================ runner
 
 
