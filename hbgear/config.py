@@ -217,13 +217,16 @@ class SweepConfig:
     """Frequency-response sweep for `frc`.
 
     **Fields:** `speed_rpm_start`, `speed_rpm_stop` [rpm] (either may be larger);
-    `max_points` [-]; `step_rpm` [rpm] (initial continuation step, or `None` for automatic).
+    `max_points` [-]; `step_rpm` [rpm] (initial continuation step, or `None` for automatic);
+    `period_doubling`: follow the nu = 2 branch at each period doubling -- ``True``, ``False`` or
+    ``None`` for "auto" (only where the nu = 2 problem is small; crossings are always located).
     """
 
     speed_rpm_start: float = 1000.0
     speed_rpm_stop: float = 20000.0
     max_points: int = 4000
     step_rpm: float | None = None
+    period_doubling: bool | None = None
 
     def __post_init__(self):
         if self.speed_rpm_start == self.speed_rpm_stop:
@@ -507,6 +510,14 @@ def _harmonics(key: str, value: object) -> int | None:
     return value
 
 
+def _bool_or_auto(key: str, value: object) -> bool | None:
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return None
+    raise ConfigError(key, value, 'true, false or "auto"')
+
+
 def _address(key: str, value: object) -> str:
     if not isinstance(value, str) or not value.strip():
         raise ConfigError(key, value, 'a Dask scheduler address such as "tcp://host:8786"')
@@ -628,6 +639,7 @@ _sweep = _section("sweep", SweepConfig, {
     "speed_rpm_stop": _Key("speed_rpm_stop", _SPEED),
     "max_points": _Key("max_points", _int(2)),
     "step_rpm": _Key("step_rpm", _num(0.0, what="a positive step in rpm")),
+    "period_doubling": _Key("period_doubling", _bool_or_auto),
 })  # start != stop is checked by SweepConfig itself
 _map = _section("map", MapConfig, {
     "speed_rpm_start": _Key("speed_rpm_start", _SPEED),
