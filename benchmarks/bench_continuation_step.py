@@ -17,7 +17,7 @@ compares its points with the current version's (max |z diff| over points, when t
 store the same number of points). Variants of the current version: ``default``, ``chord``
 (``PseudoArclength(chord=True)``) and ``jit`` (``jit_step=True``) -- see ``--variants``.
 
-Run: ``/tmp/venv/bin/python benchmarks/bench_continuation_step.py [--baseline FILE] [--repeats 3]``.
+Run: ``python benchmarks/bench_continuation_step.py [--baseline FILE] [--repeats 3]``.
 """
 
 from __future__ import annotations

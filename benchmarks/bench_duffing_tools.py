@@ -17,7 +17,7 @@ Problem: ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos(w t)``, ``w`` in ``[0.5, 2]`` 
 
 Timings are the median of ``repeats`` runs after a first, compiling, run (reported apart).
 
-Run: ``/tmp/venv/bin/python benchmarks/bench_duffing_tools.py [--quick]``.
+Run: ``python benchmarks/bench_duffing_tools.py [--quick]``.
 """
 
 from __future__ import annotations

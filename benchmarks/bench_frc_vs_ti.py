@@ -16,7 +16,7 @@ Model: ``examples/paper_table1.toml`` with ``friction.model = NLTV``, ``friction
 - **Accuracy**: at each sampled point, RMS(DTE_HB - DTE_TI) / RMS(DTE_TI - mean) over one
   steady mesh period (the waveforms themselves, not a summary number).
 
-Run: ``/tmp/venv/bin/python benchmarks/bench_frc_vs_ti.py [--quick]``.
+Run: ``python benchmarks/bench_frc_vs_ti.py [--quick]``.
 """
 
 from __future__ import annotations

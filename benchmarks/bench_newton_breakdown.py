@@ -22,7 +22,7 @@ own result:
 - ``cached operator``: the periodic-coefficient matrices computed once per geometry (valid when
   they do not depend on ``p``, checked numerically here), ``L(p) = M (x) D(w)^2 + K + C D(w)``.
 
-Run: ``/tmp/venv/bin/python benchmarks/bench_newton_breakdown.py [--quick]``.
+Run: ``python benchmarks/bench_newton_breakdown.py [--quick]``.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ r"""Stability maps: exact monodromy for LTV-A, Hill's method for NLTV.
   along the speeds, then Hill's method); per-point time. A second timing splits one point into
   its HB solve and its Hill eigenproblem.
 
-Run: ``/tmp/venv/bin/python benchmarks/bench_stability_map.py [--quick]``.
+Run: ``python benchmarks/bench_stability_map.py [--quick]``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Run all hbgear benchmarks in one process on this machine and print one table of results.
 
-``/tmp/venv/bin/python benchmarks/run.py [--quick]`` (``--quick``: smaller ranges, fewer
+``python benchmarks/run.py [--quick]`` (``--quick``: smaller ranges, fewer
 repeats, a few minutes). Each benchmark prints its own details first; the summary table at the
 end sets each measured number next to its goal from the issue. The machine (``nproc``, CPU
 model, load average) and the versions are printed with it: compare numbers from one run only.

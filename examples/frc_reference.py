@@ -1,6 +1,6 @@
 """Frequency-response curve of the reference pair over its primary resonance (arc-length continuation).
 
-    /tmp/venv/bin/python examples/frc_reference.py        # from the repository root, ~30 s
+    python examples/frc_reference.py        # from the repository root, ~30 s
 
 Calls the `hbgear frc` command (the same as `hbgear frc examples/paper_table1.toml --set ...`),
 which writes frc.csv, frc.json and frc.png into examples/out/frc_reference/, then redraws the

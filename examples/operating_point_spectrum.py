@@ -1,6 +1,6 @@
 """One operating point by harmonic balance: DTE waveform and spectrum, with the read-outs.
 
-    /tmp/venv/bin/python examples/operating_point_spectrum.py [RPM]     # from the repo root, ~10 s
+    python examples/operating_point_spectrum.py [RPM]     # from the repo root, ~10 s
 
 Reference pair, NLTV friction (instantaneous sliding velocity), soft output spring; plot in
 examples/out/operating_point_spectrum.png.

@@ -1,6 +1,6 @@
 """Continuation in the input torque at a fixed speed, with backlash near the primary resonance.
 
-    /tmp/venv/bin/python examples/parameter_continuation.py [RPM]     # from the repo root, ~30 s
+    python examples/parameter_continuation.py [RPM]     # from the repo root, ~30 s
 
 examples/backlash.toml (no friction) with the backlash cut to 5 um. While the teeth only lose contact
 the response is positively homogeneous (DTE - b scales with the torque exactly); once they hit the

@@ -1,6 +1,6 @@
 """Stability map: max |Floquet multiplier| over speed x contact ratio (paper Fig. 13 in kind).
 
-    /tmp/venv/bin/python examples/stability_map.py     # from the repo root, ~5 s
+    python examples/stability_map.py     # from the repo root, ~5 s
 
 LTV formulation A, single-coordinate `torques` boundary: exact monodromy (products of matrix
 exponentials), k_max and k_min held as the contact ratio varies. The same as

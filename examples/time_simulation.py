@@ -1,6 +1,6 @@
 """Time integration to steady state: DTE, mesh force and the friction force of each tooth pair.
 
-    /tmp/venv/bin/python examples/time_simulation.py [RPM]     # from the repo root, ~15 s
+    python examples/time_simulation.py [RPM]     # from the repo root, ~15 s
 
 Reference pair with formulation B (friction from the dynamic mesh force), NLTV, soft output
 spring with a light damper so the soft mode settles. Plot in examples/out/time_simulation.png.

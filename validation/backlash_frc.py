@@ -1,6 +1,6 @@
 """Backlash frequency-response curve through both folds, against time-integration sweeps.
 
-    /tmp/venv/bin/python validation/backlash_frc.py
+    python validation/backlash_frc.py
 
 Writes validation/out/backlash_frc.png and validation/out/backlash_frc.md.
 Reference pair of ``examples/backlash.toml`` (40 um backlash, no friction) reduced to the DTE

@@ -1,7 +1,7 @@
 """Paper Fig. 12 in kind: in an unstable zone of the LTV model the LTV response grows without
 bound; is the NLTV response (friction from the instantaneous sliding velocity) bounded?
 
-    /tmp/venv/bin/python validation/fig12_ltv_vs_nltv.py
+    python validation/fig12_ltv_vs_nltv.py
 
 Writes validation/out/fig12_ltv_vs_nltv.png and validation/out/fig12_ltv_vs_nltv.md (about
 3-4 minutes on 2 cores). Paper conditions: zeta = 0.001, mu0 = 0.1 (Coulomb; NLTV regularised,

@@ -1,7 +1,7 @@
 """Paper Fig. 13 in kind: the primary parametric instability zone over speed x contact ratio,
 without friction and with Coulomb friction (formulations A and B), unit contours overlaid.
 
-    /tmp/venv/bin/python validation/fig13_stability_map.py
+    python validation/fig13_stability_map.py
 
 Writes validation/out/fig13_stability_map.png and validation/out/fig13_stability_map.md.
 LTV model, boundary "torques" (the DTE alone, the paper's single-DOF stability model),

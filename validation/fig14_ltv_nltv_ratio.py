@@ -1,6 +1,6 @@
 """Paper Fig. 14 in kind: ratio of LTV to NLTV peak-to-peak DTE over speed x contact ratio.
 
-    /tmp/venv/bin/python validation/fig14_ltv_nltv_ratio.py
+    python validation/fig14_ltv_nltv_ratio.py
 
 Writes validation/out/fig14_ltv_nltv_ratio.png and validation/out/fig14_ltv_nltv_ratio.md.
 Reference pair (``examples/paper_table1.toml``: soft output spring, Coulomb mu0 = 0.1,

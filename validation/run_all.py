@@ -1,9 +1,9 @@
 """Run every validation check and write ``validation/REPORT.md`` with its figures.
 
-    /tmp/venv/bin/python -m validation              # from the repository root; resumes
-    /tmp/venv/bin/python -m validation --fresh      # recompute every check
-    /tmp/venv/bin/python -m validation --only duffing_frc --only hb_vs_ti
-    /tmp/venv/bin/python -m validation --list
+    python -m validation              # from the repository root; resumes
+    python -m validation --fresh      # recompute every check
+    python -m validation --only duffing_frc --only hb_vs_ti
+    python -m validation --list
 
 Each check is a function returning a record: rows ``(quantity, value, tolerance, pass)``,
 figures and a note (what agrees with the paper, what differs and why). The runner adds the wall
