@@ -356,22 +356,19 @@ def check_energy():
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     header = ["coupling", "route", "input [W]", "output [W]", "loss [W]", "friction [W]", "mesh <F d'> [W]", "rel. error"]
     note = f"""Reference pair at {rpm:g} rpm, spring boundary (zeta_b 0.1), zeta 0.01, Coulomb mu0 = 0.1, HB with H = 32 and
-the default N = 256 AFT samples, TI with rtol 1e-9. MODEL.md section 4: the mean net input power
+the default N = 4096 AFT samples, TI with rtol 1e-9. MODEL.md section 4: the mean net input power
 (input - output) must equal the friction loss plus the mean mesh power <F_mesh delta'>.
 
 {md_table(header, table)}
 
 - Linear couplings (LTI, LTV-A/B) balance to rounding in HB: the Galerkin projection of the mean
-  is exact. NLTV balances only to ~5e-4 (A) and ~1e-3 (B) in HB: its friction is evaluated on N uniform samples
-  (AFT), and the jumps of the load shares at pair entry and exit alias at O(1/N) into the mean
-  friction torque, which shifts the mean output torque (the friction loss itself, evaluated by
-  exact quadrature, agrees with TI to ~1e-5). Raising N to 4096 brings NLTV-A to ~8e-5; an AFT
-  projection on the breakpoint-graded quadrature (as the linear part uses) would remove it.
-- TI balances to ~1e-8 for LTV and NLTV. **LTI in TI** misses by ~1.6e-4 of the loss: its mesh
-  power read-out differs from HB's by ~0.15 W while the loss and friction loss agree. In LTI the
-  excitation c d_st' has impulses at the stiffness jumps (applied as velocity kicks by
-  `hbgear.simulate`); the work of those kicks is not in the quadrature of F_mesh delta' on the
-  smooth segments. This is a read-out issue of `hbgear.simulate`/`hbgear.metrics` for LTI only.
+  is exact. NLTV balances to ~8e-5 (A) and ~1.6e-4 (B) in HB: its friction is evaluated on N
+  uniform samples (AFT), and the jumps of the load shares at pair entry and exit alias at O(1/N)
+  into the mean friction torque (at N = 256: 5.5e-4 and 1.1e-3). An AFT projection on the
+  breakpoint-graded quadrature (as the linear part uses) would remove it.
+- TI balances to ~1e-8 for every coupling. For LTI the excitation c d_st' has impulses at the
+  stiffness jumps (velocity kicks in `hbgear.simulate`); their work J (v- + v+)/2 is part of the
+  mesh power read-out.
 - Paper (Fig. 7 text): with the soft spring the mean input power is the friction loss, 629 W in its
   case; here ~957 W at 3000 rpm (~629 W near 1970 rpm, see Fig. 7 below). The mesh power is
   below 0.1 % of the loss: it is the viscous loss plus the work of the jumping stiffness."""
