@@ -104,7 +104,7 @@ def run_hbgear(repeats, ds_max=0.05):
     def res(z, p):
         return hb.residual(jnp.asarray(z), p, system)
 
-    method = PseudoArclength(ds=0.01, ds_min=1e-7, ds_max=ds_max, max_angle_deg=10.0, parameter_scale=W1)
+    method = PseudoArclength(ds=0.01, ds_min=1e-7, ds_max=ds_max, max_angle_deg=10.0, parameter_scale=W1, jit_step=True)
 
     def curve():
         return continuation(rjp, res, np.zeros(hb.size), W0, W1, method, max_points=5000,

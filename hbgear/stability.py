@@ -41,7 +41,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.linalg
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 __all__ = [
     "TRIVIAL_TOL",
@@ -475,6 +475,17 @@ def _harmonic_centre(vectors: np.ndarray, ndof: int, harmonics: int) -> np.ndarr
     return (k * (plus - minus)).sum(axis=0) / np.maximum(total, 1e-300)
 
 
+_BLAS_CONTROLLER: list = []
+
+
+def _single_thread_blas():
+    """Context limiting BLAS to one thread; the controller scans the libraries once (a fresh
+    ``threadpool_limits`` rescans them: ~1 ms per call, more than a small eigenproblem)."""
+    if not _BLAS_CONTROLLER:
+        _BLAS_CONTROLLER.append(ThreadpoolController())
+    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
+
+
 def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6):
     """The ``2n`` Floquet exponents picked from the Hill spectrum, and their multipliers.
 
@@ -502,7 +513,7 @@ def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: flo
     companion[:size, size:] = np.eye(size)
     companion[size:, :size] = -rhs[:, :size]
     companion[size:, size:] = -rhs[:, size:]
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _single_thread_blas():
         # threads only add synchronisation to an eigenproblem this small (260 at H=32):
         # 0.1 s single-threaded against 0.5-2 s threaded on a loaded 2-core machine
         mu, vec = scipy.linalg.eig(companion)
