@@ -389,6 +389,29 @@ class SubharmonicBranch:
         return rad_s_to_rpm(w[turns])
 
 
+def amplitude_residuals(hb2, system, w_star: float, phi, offset: float):
+    """Residuals for continuing a nu=2 branch in its half-order amplitude ``a``.
+
+    Unknowns ``y = (z, w / w_star)``; equations ``R(z; w) = 0`` and ``phi . z - offset = a``.
+    **Returns:** ``(both, resid)``: ``(y, a) -> (R, dR/dy, dR/da)`` and ``(y, a) -> R``.
+    """
+
+    def both(y, a):
+        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
+        r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+        top = np.hstack([np.asarray(jz, dtype=float), w_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
+        jac = np.vstack([top, np.append(phi, 0.0)])
+        jpar = np.zeros(len(r))
+        jpar[-1] = -1.0
+        return r, jac, jpar
+
+    def resid(y, a):
+        r = hb2.residual(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
+        return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+
+    return both, resid
+
+
 def continue_period_doubled(
     model,
     point: PeriodDoublingPoint,
@@ -428,18 +451,7 @@ def continue_period_doubled(
     offset = float(phi @ z_star)
     sign = 1.0 if omega_end > w_star else -1.0
 
-    def both(w, a):
-        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(w[:-1]), float(w[-1] * w_star), system)
-        r = np.append(np.asarray(r, dtype=float), phi @ w[:-1] - offset - a)
-        top = np.hstack([np.asarray(jz, dtype=float), w_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
-        jac = np.vstack([top, np.append(phi, 0.0)])
-        jpar = np.zeros(len(r))
-        jpar[-1] = -1.0
-        return r, jac, jpar
-
-    def resid(w, a):
-        r = hb2.residual(jnp.asarray(w[:-1]), float(w[-1] * w_star), system)
-        return np.append(np.asarray(r, dtype=float), phi @ w[:-1] - offset - a)
+    both, resid = amplitude_residuals(hb2, system, w_star, phi, offset)
 
     def stop(a, w):
         if (w[-1] * w_star - omega_end) * sign >= 0:

@@ -383,7 +383,7 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
 
     **Returns:** ``(omega (n,), z (n, size), residual (n,), hb2, status, message)``.
     """
-    from ..bifurcation import embed_subharmonic, half_order_mode
+    from ..bifurcation import amplitude_residuals, embed_subharmonic, half_order_mode
 
     sol = point.solution
     hb2 = HarmonicBalance(model.ndof, harmonics2, 2, samples2)
@@ -393,18 +393,7 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
     phi, _ = half_order_mode(hb2, z_star, w_star, system)
     offset = float(phi @ z_star)
 
-    def both(y, a):
-        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
-        r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
-        top = np.hstack([np.asarray(jz, dtype=float), w_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
-        jac = np.vstack([top, np.append(phi, 0.0)])
-        jpar = np.zeros(len(r))
-        jpar[-1] = -1.0
-        return r, jac, jpar
-
-    def resid(y, a):
-        r = hb2.residual(jnp.asarray(y[:-1]), float(y[-1] * w_star), system)
-        return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+    both, resid = amplitude_residuals(hb2, system, w_star, phi, offset)
 
     def outside(w):
         return w < omega_lo or w > omega_hi
