@@ -703,8 +703,13 @@ def run(config, args, out_dir) -> int:
             print(f"frc: warning: period doubling near {r.get('speed_rpm', r['bracket_rpm'][0]):.6g} rpm: "
                   f"{r['message']} (nu = 1 curve and frc.json written)", file=sys.stderr)
     peak = summary["peak"]
-    pd_text = "".join(f"period doubling at {r['speed_rpm']:.6g} rpm, nu = 2 branch {r['status']} ({r['points']} points); "
-                      for r in pd_records if "speed_rpm" in r)
+    located = [r for r in pd_records if "speed_rpm" in r]
+    followed = [r for r in located if r["points"] > 0]
+    pd_text = ""
+    if located:
+        speeds = ", ".join(f"{r['speed_rpm']:.6g}" for r in located)
+        points = sum(r["points"] for r in followed)
+        pd_text = f"period doubling at {speeds} rpm ({len(followed)} nu = 2 branches followed, {points} points); "
     print(
         f"frc: {len(branch)} points from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={harmonics}, nu={nu}); "
         f"peak DTE p2p {peak['dte_p2p_um']:.4g} um at {peak['speed_rpm']:.6g} rpm; "
