@@ -34,7 +34,10 @@ def waveform_rows(solution, points: int):
 def waveform_header():
     header = ["time_s", "mesh_phase", "dte_um", "dte_velocity_m_per_s", "mesh_force_N"]
     for k in range(PAIR_SLOTS):
-        header += [f"pair{k}_normal_load_N", f"pair{k}_mu", f"pair{k}_friction_force_N", f"pair{k}_sliding_velocity_m_per_s"]
+        # pair1 entered contact at the start of the current mesh period, pair2 one period earlier
+        # (the same names as simulate's timeseries.csv)
+        j = k + 1
+        header += [f"pair{j}_normal_load_N", f"pair{j}_mu", f"pair{j}_friction_force_N", f"pair{j}_sliding_velocity_m_per_s"]
     return header
 
 
