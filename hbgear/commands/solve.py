@@ -12,6 +12,7 @@ import numpy as np
 from ..cli import Command, register
 from ..io import write_csv_atomic, write_json_atomic
 from ..model import PAIR_SLOTS
+from ..stability import is_stable
 from .common import add_speed_argument, floquet_of, model_of, solution_record, solve_config
 
 
@@ -47,7 +48,7 @@ def run(config, args, out_dir) -> int:
     multipliers = floquet_of(solution)
     record = solution_record(solution)
     record["max_abs_floquet"] = float(np.max(np.abs(multipliers))) if multipliers.size else 0.0
-    record["stable"] = bool(record["max_abs_floquet"] < 1.0)
+    record["stable"] = is_stable(multipliers)  # the criterion frc uses
     record["floquet_multipliers"] = [[float(m.real), float(m.imag)] for m in multipliers]
     record["config"] = config.to_dict()
     write_csv_atomic(
