@@ -235,7 +235,8 @@ class HarmonicBalance:
         return self._residual(z, p, system, quad)
 
     def _nonlinear_jacobian(self, x, extra, p, system):
-        """``d(P Q_nl)/dx`` in SI from the sampled pointwise derivatives of ``Q_nl``.
+        """``(T_q, T_v, I (x) D)``: ``d(P Q_nl)/dx = T_q + T_v (I (x) D)`` in SI, from the sampled
+        pointwise derivatives of ``Q_nl`` with respect to ``q`` and ``q'``.
 
         ``P diag(g) E`` is the convolution matrix of the ``N``-point DFT coefficients of ``g``
         exactly when ``N > 4H`` (no index wraps), so the Jacobian costs ``2 ndof`` pointwise
@@ -256,18 +257,23 @@ class HarmonicBalance:
         dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[j][:, None], qd.shape),))[1] for j in range(n)], axis=1)
         coeff = jnp.fft.rfft(jnp.stack([dq, dv]), axis=-1)[..., : 2 * H + 1] / N  # (2, n, n, 2H+1)
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (2, n, n, B, B)
-        return self._flatten(blocks[0] + blocks[1] @ d[None, None])
+        return self._flatten(blocks[0]), self._flatten(blocks[1]), jnp.kron(jnp.eye(n), d)
+
+    def _toeplitz_ok(self, system) -> bool:
+        """The sampled-derivative Jacobian is exact when ``N > 4H``."""
+        return system.is_linear or self.samples > 4 * self.harmonics
 
     @partial(jax.jit, static_argnums=0)
     def _residual_and_jacobian_jit(self, z, p, system, quad):
         operator = self.linear_operator(system, p, quad)
         r = self._residual(z, p, system, quad, operator)
-        if not system.is_linear and self.samples <= 4 * self.harmonics:
+        if not self._toeplitz_ok(system):
             return r, jax.jacfwd(self._residual)(z, p, system, quad, operator)
         jac = operator[0]
         if not system.is_linear:
             x, extra = self._split(system, z)
-            jac = jac - self._nonlinear_jacobian(x, extra, p, system)
+            t_q, t_v, d = self._nonlinear_jacobian(x, extra, p, system)
+            jac = jac - t_q - t_v @ d
         jac = jac * (system.displacement_scale / system.force_scale)
         k = system.free_mean_dof
         if k is not None:
@@ -289,12 +295,21 @@ class HarmonicBalance:
         lin, _, c_conv = self.linear_operator(system, p, quad)
         xs, fs = system.displacement_scale, system.force_scale
 
-        def response(xx, shift):
-            v = self._velocity(xx, system, p) + shift
-            return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system)) / fs
+        if self._toeplitz_ok(system):
+            # the same sampled-derivative blocks as the Newton Jacobian: d/dx = L - T_q - T_v D,
+            # d/d(velocity) = C - T_v (no tangents through the AFT)
+            if system.is_linear:
+                jz, jv = lin / fs, c_conv / fs
+            else:
+                t_q, t_v, d_big = self._nonlinear_jacobian(x, extra, p, system)
+                jz, jv = (lin - t_q - t_v @ d_big) / fs, (c_conv - t_v) / fs
+        else:
 
-        zero = jnp.zeros_like(x)
-        jz, jv = jax.jacfwd(response, argnums=(0, 1))(x, zero)
+            def response(xx, shift):
+                v = self._velocity(xx, system, p) + shift
+                return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system)) / fs
+
+            jz, jv = jax.jacfwd(response, argnums=(0, 1))(x, jnp.zeros_like(x))
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
         mass = system.mass_matrix(p, jnp) / fs
         d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
