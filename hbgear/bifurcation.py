@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg
 
 from . import simulate as _simulate_module
-from .continuation import Branch, PseudoArclength, Status, continuation
+from .continuation import Branch, IllinoisBracket, PseudoArclength, Status, continuation
 from .errors import ConvergenceError
 from .hb import HarmonicBalance
 from .solve import PeriodicSolution, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
@@ -214,27 +214,17 @@ def locate_period_doubling(
             f"{rad_s_to_rpm(omega_a):.6g} and {rad_s_to_rpm(omega_b):.6g} rpm do not bracket a multiplier "
             f"crossing -1 (most negative real multipliers {ma:.6g}, {mb:.6g})"
         )
-    a, b = float(omega_a), float(omega_b)
-    best = (a, sa, ma) if abs(ga) < abs(gb) else (b, sb, mb)
-    side = 0
+    bracket = IllinoisBracket(float(omega_a), ga, float(omega_b), gb)
+    best = (bracket.a, sa, ma) if abs(ga) < abs(gb) else (bracket.b, sb, mb)
     for _ in range(max_steps):
-        if abs(b - a) <= speed_tolerance * max(abs(a), abs(b)):
+        if abs(bracket.b - bracket.a) <= speed_tolerance * max(abs(bracket.a), abs(bracket.b)):
             break
-        c = (a * gb - b * ga) / (gb - ga)
+        c = bracket.point()
         gc, sc, mc = g(c)
         best = (c, sc, mc)
         if gc == 0:
             break
-        if gc * ga > 0:
-            a, ga = c, gc
-            if side == -1:
-                gb *= 0.5
-            side = -1
-        else:
-            b, gb = c, gc
-            if side == 1:
-                ga *= 0.5
-            side = 1
+        bracket = bracket.narrowed(c, gc)
     omega, sol, mu = best
     return PeriodDoublingPoint(
         float(omega), rad_s_to_rpm(float(omega)), sol, float(mu), (rad_s_to_rpm(omega_a), rad_s_to_rpm(omega_b))

@@ -599,6 +599,28 @@ def continuation(
     return finish(status, detail)
 
 
+class IllinoisBracket(NamedTuple):
+    """A sign-changing bracket ``f(a) f(b) <= 0`` narrowed by Illinois regula falsi.
+
+    :meth:`point` is the next evaluation point; :meth:`narrowed` keeps the sub-bracket that
+    still changes sign and halves the stale end's value when the same end is kept twice.
+    """
+
+    a: float
+    fa: float
+    b: float
+    fb: float
+    side: int = 0
+
+    def point(self) -> float:
+        return (self.a * self.fb - self.b * self.fa) / (self.fb - self.fa)
+
+    def narrowed(self, c: float, fc: float) -> IllinoisBracket:
+        if fc * self.fa > 0:
+            return IllinoisBracket(c, fc, self.b, self.fb * 0.5 if self.side == -1 else self.fb, -1)
+        return IllinoisBracket(self.a, self.fa * 0.5 if self.side == 1 else self.fa, c, fc, 1)
+
+
 def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
     """The turning point between two converged points: zero of the tangent's p-component along
     the arc, parametrised by ``s = t0 . (y - y0)``, by Illinois regula falsi."""
@@ -610,28 +632,17 @@ def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
             return None, None
         return point, point.tangent[-1]
 
-    s_lo, g_lo = 0.0, float(t0[-1])
-    s_hi, g_hi = h, g1
+    bracket = IllinoisBracket(0.0, float(t0[-1]), h, g1)
     best = None
-    side = 0
     for _ in range(max_steps):
-        s = (s_lo * g_hi - s_hi * g_lo) / (g_hi - g_lo)
+        s = bracket.point()
         point, g = at(s)
         if point is None:
             return best
         best = point
-        if abs(g) < 1e-12 or abs(s_hi - s_lo) < 1e-13 * max(abs(h), 1e-300):
+        if abs(g) < 1e-12 or abs(bracket.b - bracket.a) < 1e-13 * max(abs(h), 1e-300):
             return point
-        if g * g_lo > 0:
-            s_lo, g_lo = s, g
-            if side == -1:
-                g_hi *= 0.5
-            side = -1
-        else:
-            s_hi, g_hi = s, g
-            if side == 1:
-                g_lo *= 0.5
-            side = 1
+        bracket = bracket.narrowed(s, g)
     return best
 
 

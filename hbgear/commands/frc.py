@@ -48,7 +48,7 @@ import numpy as np
 
 from ..build import build_model
 from ..cli import Command, register
-from ..continuation import PseudoArclength, Status, continuation
+from ..continuation import IllinoisBracket, PseudoArclength, Status, continuation
 from ..errors import ConvergenceError
 from ..hb import HarmonicBalance
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
@@ -340,26 +340,16 @@ def _locate_on_segment(model, hb, branch, i, harmonics, samples, tolerance, max_
         return None, (f"the multipliers flagged a crossing between {rad_s_to_rpm(pa):.6g} and {rad_s_to_rpm(pb):.6g} rpm "
                       f"that the exact/variational monodromy does not confirm (most negative real multipliers "
                       f"{ma:.6g}, {mb:.6g})")
-    a, b = pa, pb
-    best = (a, sa, ma, ga) if abs(ga) < abs(gb) else (b, sb, mb, gb)
-    side = 0
+    bracket = IllinoisBracket(pa, ga, pb, gb)
+    best = (pa, sa, ma, ga) if abs(ga) < abs(gb) else (pb, sb, mb, gb)
     for _ in range(max_steps):
-        if abs(b - a) <= speed_tolerance * max(abs(a), abs(b)) or best[3] == 0:
+        if abs(bracket.b - bracket.a) <= speed_tolerance * max(abs(bracket.a), abs(bracket.b)) or best[3] == 0:
             break
-        c = (a * gb - b * ga) / (gb - ga)
+        c = bracket.point()
         gc, sc, mc = g(c)
         if abs(gc) <= abs(best[3]):
             best = (c, sc, mc, gc)
-        if gc * ga > 0:
-            a, ga = c, gc
-            if side == -1:
-                gb *= 0.5
-            side = -1
-        else:
-            b, gb = c, gc
-            if side == 1:
-                ga *= 0.5
-            side = 1
+        bracket = bracket.narrowed(c, gc)
     w, sol, mu, _ = best
     return PeriodDoublingPoint(float(w), rad_s_to_rpm(float(w)), sol, float(mu),
                                (rad_s_to_rpm(pa), rad_s_to_rpm(pb))), None
