@@ -54,8 +54,21 @@ the model is a pytree argument, so one compilation serves every model of the sam
 torque), zero velocities, so the transient is short. After every mesh period the DTE at fixed
 phases (the quadrature nodes) is compared with the previous period and with the one before it,
 relative to its peak-to-peak value; the state counts as steady with period 1 (2) mesh cycles
-when that change is below `steady_tolerance` in two successive checks. Only the DTE is tested:
-the soft output mode of the ``"spring"`` boundary with ``damping_ratio = 0`` never decays.
+when that change is below `steady_tolerance` in two successive checks. Only the DTE is tested
+(and ``u'`` for ``"reaction"``): the soft output mode of the ``"spring"`` boundary with
+``damping_ratio = 0`` never decays.
+
+**Reaction boundary.** The free output inertia carries a constant output torque ``T_g = R_bg R``
+whose value periodicity fixes, ``R = <F_2>`` (the mean of the second equation's right-hand side
+without it). Marching cannot impose periodicity, so ``R`` is updated between cycles to the last
+cycle's ``<F_2>`` and the rigid-body drift it caused is taken out of ``u`` and ``u'``
+(:func:`_reaction_update`, started from the quasi-static ``R``). Corrections stop once the DTE
+and ``u'`` are steady, so the read-out period integrates the equations with one constant
+``R`` -- the harmonic-balance solution (mean ``u`` pinned to 0).
+
+**Fixed-length runs.** :func:`march` integrates a given number of cycles with the same
+machinery (:class:`_Integrator`) and no steady-state test, keeping per-cycle read-outs and the
+Poincare samples (unstable zones, transients, paper Figs. 12 and 14).
 
 **Read-outs.** The summary comes from :func:`hbgear.metrics.periodic_summary` over one steady
 period, evaluated at composite Gauss--Legendre nodes of the segments between breakpoints (the
@@ -77,7 +90,7 @@ from .errors import ConfigError, ConvergenceError
 from .metrics import periodic_summary
 from .quadrature import mesh_period_rule
 
-__all__ = ["TimeResponse", "simulate", "DEFAULT_V_REG"]
+__all__ = ["TimeResponse", "MarchRecord", "simulate", "march", "DEFAULT_V_REG"]
 
 #: Regularisation speed [m/s] for a discontinuous friction law under the NLTV coupling.
 DEFAULT_V_REG = 5e-3  # the config default, [friction] regularization_m_per_s
@@ -106,7 +119,8 @@ class TimeResponse:
     - `nodes`: ``(s, q, qd, weights)`` at the quadrature nodes of the steady period (weights sum
       to 1) -- what `summary` was computed from.
     - `u_static` [m]; `method`; `elapsed_s` wall time [s]; `friction_law` used (after any
-      regularisation).
+      regularisation); `reaction_force_N`: the output force ``T_g/R_bg`` [N] of the steady
+      period (``"reaction"``; 0 otherwise).
     """
 
     speed_rpm: float
@@ -127,18 +141,23 @@ class TimeResponse:
     method: str
     elapsed_s: float
     friction_law: Any
+    reaction_force_N: float = 0.0
 
 
 # ----------------------------------------------------------------------------- right-hand side
 
 
 def _make_rhs(model, omega, u_static, minv, backend, with_jacobian):
-    """``f(s, y)`` (and its Jacobian in ``y`` or None) for the first-order system."""
+    """``f(s, y, reaction)`` (and its Jacobian in ``y`` or None) for the first-order system.
+
+    `reaction` is the output force ``T_g/R_bg`` [N] of the ``"reaction"`` boundary (0 otherwise),
+    a traced argument: changing it between mesh cycles does not recompile.
+    """
     ndof = model.ndof
     if backend == "numpy":
 
-        def rhs_np(s, y):
-            force = model.generalized_force(np.float64(s), y[:ndof], y[ndof:], omega, "all", u_static, 0.0, xp=np)
+        def rhs_np(s, y, reaction):
+            force = model.generalized_force(np.float64(s), y[:ndof], y[ndof:], omega, "all", u_static, reaction, xp=np)
             return np.concatenate([y[ndof:], minv @ force])
 
         return rhs_np, None
@@ -149,8 +168,8 @@ def _make_rhs(model, omega, u_static, minv, backend, with_jacobian):
     jax.config.update("jax_enable_x64", True)
     minv_j = jnp.asarray(minv)
 
-    def rhs(s, y):
-        force = model.generalized_force(s, y[:ndof], y[ndof:], omega, "all", u_static, 0.0, xp=jnp)
+    def rhs(s, y, reaction):
+        force = model.generalized_force(s, y[:ndof], y[ndof:], omega, "all", u_static, reaction, xp=jnp)
         return jnp.concatenate([y[ndof:], minv_j @ force])
 
     # the model's constants are closed over: one compilation per call (~0.3 s), then ~30 us
@@ -158,11 +177,11 @@ def _make_rhs(model, omega, u_static, minv, backend, with_jacobian):
     rhs_jit = jax.jit(rhs)
     jac_jit = jax.jit(jax.jacfwd(rhs, argnums=1)) if with_jacobian else None
 
-    def f(s, y):
-        return np.asarray(rhs_jit(s, y))
+    def f(s, y, reaction):
+        return np.asarray(rhs_jit(s, y, reaction))
 
-    def jac(s, y):
-        return np.asarray(jac_jit(s, y))
+    def jac(s, y, reaction):
+        return np.asarray(jac_jit(s, y, reaction))
 
     return f, (jac if with_jacobian else None)
 
@@ -259,7 +278,201 @@ def _deflate_soft_mode(model, omega, u_static, node_s, node_w, node_y, y_end, tm
     return y
 
 
-# ----------------------------------------------------------------------------- driver
+def _output_force_mean(model, omega, node_s, node_w, node_y):
+    """``<F_2> = <T_p/R_bp + T_fp/R_bp + T_fg/R_bg>`` [N] over a cycle (``"reaction"``, no spring)."""
+    ndof = model.ndof
+    force = model.generalized_force(node_s, node_y[:ndof], node_y[ndof:], omega, "all", 0.0, 0.0)
+    return float(np.sum(node_w * force[1]))
+
+
+def _reaction_update(model, omega, node_s, node_w, node_y, y_end, reaction, tm):
+    r"""Output force and start state of the next cycle for the ``"reaction"`` boundary.
+
+    The output force ``R = T_g/R_bg`` is the unknown that periodicity fixes: averaging the
+    momentum equation ``(m_p delta' + (m_p + m_g) u')' = F_2 - R`` over a period gives
+    ``R = <F_2>``. The next cycle gets ``R`` from this cycle's ``<F_2>``, and the free rigid-body
+    motion is removed from the end state: ``u'`` by its cycle mean plus the half-cycle drift
+    ``T_m (<F_2> - R) / (2 (m_p + m_g))`` that a mismatched ``R`` caused, ``u`` by its cycle mean
+    (nothing depends on ``u`` itself). At the fixed point both corrections vanish and ``R`` is
+    constant, so a steady cycle (which is not corrected) is a genuine periodic trajectory of the
+    equations with a constant output torque -- the harmonic-balance solution with its mean
+    ``u`` pinned to zero.
+    """
+    ndof = model.ndof
+    mean_f2 = _output_force_mean(model, omega, node_s, node_w, node_y)
+    drift = tm * (mean_f2 - reaction) / float(model.mass_pinion_kg + model.mass_gear_kg)
+    y = y_end.copy()
+    y[1] -= float(np.sum(node_w * node_y[1]))
+    y[ndof + 1] -= float(np.sum(node_w * node_y[ndof + 1])) + 0.5 * drift
+    return y, mean_f2
+
+
+def _initial_reaction(model, omega):
+    """Output force [N] of the quasi-static state: ``<F_2>`` with zero velocities (``"reaction"``)."""
+    if model.boundary != "reaction":
+        return 0.0
+    from .quadrature import mesh_period_rule
+
+    s, w = mesh_period_rule(model.breakpoint_candidates(), 4)
+    delta, _ = model.static_state(omega)
+    q = np.stack([np.asarray(delta), 0.0 * np.asarray(s)])
+    return _output_force_mean(model, omega, np.asarray(s), np.asarray(w), np.concatenate([q, 0.0 * q]))
+
+
+# ----------------------------------------------------------------------------- one mesh cycle
+
+
+@dataclass(frozen=True)
+class _Cycle:
+    """One integrated mesh cycle: the state at the quadrature nodes and on the uniform grid,
+    ``(2 ndof, n)``, the work of the LTI impulses, the end state, the output force used."""
+
+    index: int
+    node_y: np.ndarray
+    grid_y: np.ndarray
+    kick_work: float
+    y_end: np.ndarray
+    reaction: float
+    nfev: int
+
+
+class _Integrator:
+    """The piecewise integration of one mesh period (module docstring), set up once per speed.
+
+    Holds the prepared model, the quadrature nodes (read-outs, steady-state test), the uniform
+    recording grid, the segment plan with the LTI impulses and the compiled right-hand side.
+    :meth:`run_cycle` integrates one cycle and :meth:`next_start` prepares the next;
+    :func:`simulate` and :func:`march` differ only in when they stop.
+    """
+
+    def __init__(self, model, omega, *, rtol, atol, method, backend, samples_per_cycle, deflate_soft_mode):
+        if method not in _METHODS:
+            raise ConfigError("method", method, f"one of {_METHODS}")
+        if backend not in ("jax", "numpy"):
+            raise ConfigError("backend", backend, "'jax' or 'numpy'")
+        model = _prepared_model(model)
+        self.model = model
+        self.omega = omega = float(omega)
+        _, _, wm = model.speeds(omega)
+        self.tm = tm = 2.0 * math.pi / wm
+        self.ndof = ndof = model.ndof
+        self.minv = minv = np.linalg.inv(np.asarray(model.mass_matrix(), dtype=float))
+        _, u_static = model.static_state(omega)
+        self.u_static = float(u_static)
+
+        k_mean = float(model.k_mean_N_per_m)
+        wn = math.sqrt(k_mean / float(model.mass_equivalent_kg))
+        ratio = wn / wm  # mesh-mode oscillations per mesh period
+        if atol is None:
+            atol = rtol * float(model.normal_load_N) / k_mean
+        self.rtol = rtol
+        self.atol_vec = np.concatenate([np.full(ndof, atol), np.full(ndof, atol * wn)])
+        self.method = method
+
+        # quadrature nodes (read-outs, steady test) and the uniform recording grid, per period
+        breakpoints = np.asarray(model.phase_breakpoints(), dtype=float)
+        max_order = int(min(2000, max(48, math.ceil(4.0 * ratio))))
+        node_s, node_w = mesh_period_rule(breakpoints[breakpoints > 0.0], max_order)
+        node_s, node_w = np.asarray(node_s), np.asarray(node_w)
+        keep_nodes = node_w > 0.0
+        node_s, node_w = node_s[keep_nodes], node_w[keep_nodes]
+        if np.any(np.diff(node_s) <= 0.0):
+            order = np.argsort(node_s)
+            node_s, node_w = node_s[order], node_w[order]
+        self.node_s, self.node_w = node_s, node_w
+        if samples_per_cycle is None:
+            samples_per_cycle = int(max(256, 2 ** math.ceil(math.log2(24.0 * ratio))))
+        self.grid_s = np.arange(samples_per_cycle) / samples_per_cycle
+        self.plan = _segment_plan(breakpoints, node_s, self.grid_s)
+        self.kicks = [model.lti_damping_impulse(a, omega) for a, _, _, _ in self.plan]
+        self.kick_dv = [minv @ k if np.any(k) else None for k in self.kicks]
+
+        self.implicit = method in ("Radau", "BDF", "LSODA")
+        self.deflate = deflate_soft_mode and model.boundary == "spring"
+        self.rhs, self.jac = _make_rhs(model, omega, self.u_static, minv, backend, self.implicit)
+
+    def start_state(self, initial_state):
+        """The given ``(q, q')`` at phase 0, or the quasi-static start."""
+        if initial_state is None:
+            return _initial_state(self.model, self.omega, self.u_static, self.plan[0][0] + 1e-12)
+        return np.asarray(initial_state, dtype=float).reshape(2 * self.ndof).copy()
+
+    def run_cycle(self, y, cycle: int, reaction: float) -> _Cycle:
+        """Integrate mesh cycle number `cycle` (``t = cycle T_m`` at its start) from state `y`."""
+        tm, ndof, node_s, grid_s = self.tm, self.ndof, self.node_s, self.grid_s
+        rhs, jac, method = self.rhs, self.jac, self.method
+        t_cycle = cycle * tm
+        node_y = np.empty((2 * ndof, node_s.size))
+        grid_y = np.empty((2 * ndof, grid_s.size))
+        kick_work = 0.0  # work of the LTI impulses on the DTE, J (v- + v+)/2, over this cycle
+        nfev = 0
+        for (a, b, nodes, grid), dv, impulse in zip(self.plan, self.kick_dv, self.kicks):
+            if dv is not None:
+                y = y.copy()
+                kick_work += float(impulse[0]) * (2 * y[ndof] + dv[0]) / 2
+                y[ndof:] += dv
+            width = b - a
+            margin = 1e-12 * max(width, 1e-3)
+            lo, hi = a + margin, b - margin
+            t0, t1 = t_cycle + a * tm, t_cycle + b * tm
+
+            def fun(t, yy, t0=t0, lo=lo, hi=hi, a=a):
+                return rhs(min(max(a + (t - t0) / tm, lo), hi), yy, reaction)
+
+            if jac is not None and self.implicit:
+
+                def jfun(t, yy, t0=t0, lo=lo, hi=hi, a=a):
+                    return jac(min(max(a + (t - t0) / tm, lo), hi), yy, reaction)
+
+                extra = {"jac": jfun}
+            else:
+                extra = {}
+            t_eval = np.concatenate([t_cycle + node_s[nodes] * tm, t_cycle + grid_s[grid] * tm, [t1]])
+            order = np.argsort(t_eval, kind="stable")
+            sol = solve_ivp(
+                fun, (t0, t1), y, method=method, t_eval=t_eval[order], rtol=self.rtol, atol=self.atol_vec, **extra
+            )
+            if not sol.success:
+                raise ConvergenceError(
+                    f"time integration at {self.omega * 30 / math.pi:.6g} rpm failed in mesh cycle {cycle} "
+                    f"(phase {a:.4f}..{b:.4f}): {sol.message}; try method='Radau' or looser tolerances"
+                )
+            nfev += sol.nfev
+            values = np.empty_like(sol.y)
+            values[:, order] = sol.y
+            node_y[:, nodes] = values[:, : nodes.size]
+            grid_y[:, grid] = values[:, nodes.size : nodes.size + grid.size]
+            y = values[:, -1].copy()
+        return _Cycle(cycle, node_y, grid_y, kick_work, y, float(reaction), nfev)
+
+    def next_start(self, done: _Cycle):
+        """``(state, output force)`` to start the cycle after `done`: the soft-mode deflation
+        (``"spring"``, when enabled) or the reaction update (``"reaction"``) applied to its end."""
+        if self.deflate:
+            y = _deflate_soft_mode(self.model, self.omega, self.u_static, self.node_s, self.node_w,
+                                   done.node_y, done.y_end, self.tm)
+            return y, done.reaction
+        if self.model.boundary == "reaction":
+            return _reaction_update(self.model, self.omega, self.node_s, self.node_w, done.node_y, done.y_end,
+                                    done.reaction, self.tm)
+        return done.y_end, done.reaction
+
+    def tested_rows(self):
+        """State rows of the steady-state test: the DTE, and ``u'`` for the reaction boundary
+        (its rigid-body velocity must also have settled)."""
+        return (0, self.ndof + 1) if self.model.boundary == "reaction" else (0,)
+
+
+def _relative_change(now, before):
+    """Largest change at fixed phases relative to the peak-to-peak, over the tested rows."""
+    worst = 0.0
+    for a, b in zip(now, before):
+        scale = max(float(np.ptp(a)), 1e-12 * float(np.max(np.abs(a))), 1e-300)
+        worst = max(worst, float(np.max(np.abs(a - b))) / scale)
+    return worst
+
+
+# ----------------------------------------------------------------------------- drivers
 
 
 def simulate(
@@ -283,13 +496,13 @@ def simulate(
 
     **Arguments:**
 
-    - `model`: a :class:`~hbgear.model.GearPairModel` with boundary ``"torques"`` or
-      ``"spring"``; `omega_pinion`: ``Omega_p`` [rad/s].
+    - `model`: a :class:`~hbgear.model.GearPairModel` (any boundary); `omega_pinion`:
+      ``Omega_p`` [rad/s].
     - `max_cycles`: at most this many mesh periods are integrated.
     - `rtol`, `atol`: integrator tolerances; `atol` [m] applies to the displacements (default
       ``rtol`` times the static deflection ``N/k_mean``), velocities get ``atol w_n``.
     - `steady_tolerance`: largest change of the DTE at fixed phases between periods, relative to
-      its peak-to-peak, that counts as steady [-].
+      its peak-to-peak, that counts as steady [-] (``"reaction"``: the same for ``u'``).
     - `period_cycles`: periods (in mesh cycles) to look for: ``(1,)`` or ``(1, 2)``.
     - `record_cycles`: steady mesh cycles kept on the uniform grid (raised to the period).
     - `progress`: show a tqdm bar over the cycles.
@@ -305,73 +518,29 @@ def simulate(
       (e.g. the last state of a neighbouring speed, for up/down sweeps); default: the
       quasi-static state.
 
+    With the ``"reaction"`` boundary the output force is updated after every unsteady cycle to
+    that cycle's mean ``<F_2>`` and the rigid-body drift of ``u`` is removed
+    (:func:`_reaction_update`); the force of the steady period is `reaction_force_N`.
+
     **Returns:** a :class:`TimeResponse`.
 
-    **Raises:** :class:`~hbgear.errors.ConfigError` for a ``"reaction"`` boundary (its mean
-    output torque is fixed by periodicity, which a marching scheme cannot impose) or bad
-    options; :class:`~hbgear.errors.ConvergenceError` when no steady state is reached within
+    **Raises:** :class:`~hbgear.errors.ConfigError` for bad options;
+    :class:`~hbgear.errors.ConvergenceError` when no steady state is reached within
     `max_cycles` (the message gives the speed, the cycles tried and the change reached).
     """
     start_time = time.perf_counter()
-    if model.boundary == "reaction":
-        raise ConfigError(
-            "boundary.output", "reaction", "'torques' or 'spring' for time integration (simulate)"
-        )
-    if method not in _METHODS:
-        raise ConfigError("method", method, f"one of {_METHODS}")
-    if backend not in ("jax", "numpy"):
-        raise ConfigError("backend", backend, "'jax' or 'numpy'")
     period_cycles = tuple(sorted(set(int(p) for p in period_cycles)))
     if not period_cycles or not set(period_cycles) <= {1, 2}:
         raise ConfigError("period_cycles", period_cycles, "a subset of (1, 2)")
     if max_cycles < 2:
         raise ConfigError("max_cycles", max_cycles, "an integer >= 2")
-
-    model = _prepared_model(model)
-    omega = float(omega_pinion)
-    _, _, wm = model.speeds(omega)
-    tm = 2.0 * math.pi / wm
-    ndof = model.ndof
-    mass = np.asarray(model.mass_matrix(), dtype=float)
-    minv = np.linalg.inv(mass)
-    _, u_static = model.static_state(omega)
-    u_static = float(u_static)
-
-    k_mean = float(model.k_mean_N_per_m)
-    wn = math.sqrt(k_mean / float(model.mass_equivalent_kg))
-    ratio = wn / wm  # mesh-mode oscillations per mesh period
-    if atol is None:
-        atol = rtol * float(model.normal_load_N) / k_mean
-    atol_vec = np.concatenate([np.full(ndof, atol), np.full(ndof, atol * wn)])
-
-    # quadrature nodes (read-outs, steady test) and the uniform recording grid, per period
-    breakpoints = np.asarray(model.phase_breakpoints(), dtype=float)
-    max_order = int(min(2000, max(48, math.ceil(4.0 * ratio))))
-    node_s, node_w = mesh_period_rule(breakpoints[breakpoints > 0.0], max_order)
-    node_s, node_w = np.asarray(node_s), np.asarray(node_w)
-    keep_nodes = node_w > 0.0
-    node_s, node_w = node_s[keep_nodes], node_w[keep_nodes]
-    if np.any(np.diff(node_s) <= 0.0):
-        order = np.argsort(node_s)
-        node_s, node_w = node_s[order], node_w[order]
-    if samples_per_cycle is None:
-        samples_per_cycle = int(max(256, 2 ** math.ceil(math.log2(24.0 * ratio))))
-    grid_s = np.arange(samples_per_cycle) / samples_per_cycle
-    plan = _segment_plan(breakpoints, node_s, grid_s)
-    kicks = [model.lti_damping_impulse(a, omega) for a, _, _, _ in plan]
-    kick_dv = [minv @ k if np.any(k) else None for k in kicks]
-
-    implicit = method in ("Radau", "BDF", "LSODA")
-    deflate = deflate_soft_mode and model.boundary == "spring"
-    rhs, jac = _make_rhs(model, omega, u_static, minv, backend, implicit)
-    if initial_state is None:
-        y = _initial_state(model, omega, u_static, plan[0][0] + 1e-12)
-    else:
-        y = np.asarray(initial_state, dtype=float).reshape(2 * model.ndof).copy()
+    run = _Integrator(model, omega_pinion, rtol=rtol, atol=atol, method=method, backend=backend,
+                      samples_per_cycle=samples_per_cycle, deflate_soft_mode=deflate_soft_mode)
+    model, omega, tm, ndof = run.model, run.omega, run.tm, run.ndof
+    rows = run.tested_rows()
     keep = max(record_cycles, max(period_cycles), 3)
-    history: deque = deque(maxlen=keep)  # (cycle, node_y, grid_y, kick_work)
+    history: deque[_Cycle] = deque(maxlen=keep)
     changes: deque = deque(maxlen=2)  # per-cycle (change1, change2)
-    nfev = 0
     bar = None
     if progress:
         from tqdm import tqdm
@@ -380,61 +549,15 @@ def simulate(
 
     found_period = None
     measure = math.inf
-    cycle = 0
+    y, reaction = run.start_state(initial_state), _initial_reaction(model, omega)
     for cycle in range(max_cycles):
-        t_cycle = cycle * tm
-        node_y = np.empty((2 * ndof, node_s.size))
-        grid_y = np.empty((2 * ndof, grid_s.size))
-        kick_work = 0.0  # work of the LTI impulses on the DTE, J (v- + v+)/2, over this cycle
-        for (a, b, nodes, grid), dv, impulse in zip(plan, kick_dv, kicks):
-            if dv is not None:
-                y = y.copy()
-                kick_work += float(impulse[0]) * (2 * y[ndof] + dv[0]) / 2
-                y[ndof:] += dv
-            width = b - a
-            margin = 1e-12 * max(width, 1e-3)
-            lo, hi = a + margin, b - margin
-            t0, t1 = t_cycle + a * tm, t_cycle + b * tm
-
-            def fun(t, yy, t0=t0, lo=lo, hi=hi, a=a):
-                return rhs(min(max(a + (t - t0) / tm, lo), hi), yy)
-
-            if jac is not None and implicit:
-
-                def jfun(t, yy, t0=t0, lo=lo, hi=hi, a=a):
-                    return jac(min(max(a + (t - t0) / tm, lo), hi), yy)
-
-                extra = {"jac": jfun}
-            else:
-                extra = {}
-            t_eval = np.concatenate([t_cycle + node_s[nodes] * tm, t_cycle + grid_s[grid] * tm, [t1]])
-            order = np.argsort(t_eval, kind="stable")
-            sol = solve_ivp(
-                fun, (t0, t1), y, method=method, t_eval=t_eval[order], rtol=rtol, atol=atol_vec, **extra
-            )
-            if not sol.success:
-                raise ConvergenceError(
-                    f"time integration at {omega * 30 / math.pi:.6g} rpm failed in mesh cycle {cycle} "
-                    f"(phase {a:.4f}..{b:.4f}): {sol.message}; try method='Radau' or looser tolerances"
-                )
-            nfev += sol.nfev
-            values = np.empty_like(sol.y)
-            values[:, order] = sol.y
-            node_y[:, nodes] = values[:, : nodes.size]
-            grid_y[:, grid] = values[:, nodes.size : nodes.size + grid.size]
-            y = values[:, -1].copy()
-        history.append((cycle, node_y, grid_y, kick_work))
+        done = run.run_cycle(y, cycle, reaction)
+        history.append(done)
         if bar is not None:
             bar.update(1)
-
-        # steady-state test on the DTE only
-        delta = node_y[0]
-        scale = max(float(np.ptp(delta)), 1e-12 * float(np.max(np.abs(delta))), 1e-300)
-        c1 = c2 = math.inf
-        if len(history) >= 2:
-            c1 = float(np.max(np.abs(delta - history[-2][1][0]))) / scale
-        if len(history) >= 3:
-            c2 = float(np.max(np.abs(delta - history[-3][1][0]))) / scale
+        tested = done.node_y[list(rows)]
+        c1 = _relative_change(tested, history[-2].node_y[list(rows)]) if len(history) >= 2 else math.inf
+        c2 = _relative_change(tested, history[-3].node_y[list(rows)]) if len(history) >= 3 else math.inf
         changes.append((c1, c2))
         if bar is not None:
             bar.set_postfix(change=f"{min(c1, c2):.2e}")
@@ -442,14 +565,13 @@ def simulate(
             found_period = _steady_period(list(changes), steady_tolerance, period_cycles)
             if found_period is not None:
                 measure = max(c[found_period - 1] for c in changes)
-        if found_period is not None:
-            break
+                break
         measure = c1 if 2 not in period_cycles else min(c1, c2)
-        if deflate:
-            y = _deflate_soft_mode(model, omega, u_static, node_s, node_w, node_y, y, tm)
+        # a cycle that ends steady is never corrected: the read-out period is a genuine trajectory
+        y, reaction = run.next_start(done)
     if bar is not None:
         bar.close()
-    cycles_done = cycle + 1
+    cycles_done = history[-1].index + 1
     if found_period is None:
         raise ConvergenceError(
             f"time integration at {omega * 30 / math.pi:.6g} rpm reached no steady state within "
@@ -460,21 +582,23 @@ def simulate(
 
     # one steady period at the quadrature nodes -> summary (weights sum to 1)
     steady = list(history)[-found_period:]
-    s_nodes = np.concatenate([node_s] * found_period)
-    w_nodes = np.concatenate([node_w / found_period] * found_period)
-    ys = np.concatenate([h[1] for h in steady], axis=1)
+    reaction = steady[-1].reaction
+    s_nodes = np.concatenate([run.node_s] * found_period)
+    w_nodes = np.concatenate([run.node_w / found_period] * found_period)
+    ys = np.concatenate([h.node_y for h in steady], axis=1)
     q_nodes, qd_nodes = ys[:ndof], ys[ndof:]
-    summary = {k: float(v) for k, v in periodic_summary(model, omega, s_nodes, q_nodes, qd_nodes, w_nodes, u_static).items()}
+    summary = {k: float(v) for k, v in
+               periodic_summary(model, omega, s_nodes, q_nodes, qd_nodes, w_nodes, run.u_static, reaction).items()}
     # LTI: the impulses c [d_st] of -F_mesh at the stiffness jumps do work on the DTE that the
     # quadrature over the smooth segments does not see; <F delta'> includes it
-    summary["mean_mesh_power_W"] -= sum(h[3] for h in steady) / (found_period * tm)
+    summary["mean_mesh_power_W"] -= sum(h.kick_work for h in steady) / (found_period * tm)
 
     # the recorded cycles on the uniform grid
     n_rec = min(len(history), max(record_cycles, found_period))
     rec = list(history)[-n_rec:]
-    t_rec = np.concatenate([(h[0] + grid_s) * tm for h in rec])
-    s_rec = np.concatenate([grid_s] * n_rec)
-    y_rec = np.concatenate([h[2] for h in rec], axis=1)
+    t_rec = np.concatenate([(h.index + run.grid_s) * tm for h in rec])
+    s_rec = np.concatenate([run.grid_s] * n_rec)
+    y_rec = np.concatenate([h.grid_y for h in rec], axis=1)
     q_rec, qd_rec = y_rec[:ndof], y_rec[ndof:]
     mesh = np.asarray(model.mesh_force(s_rec, q_rec, qd_rec, omega))
     pairs = {k: np.asarray(v) for k, v in model.pair_friction(s_rec, q_rec, qd_rec, omega).items()}
@@ -493,7 +617,136 @@ def simulate(
         cycles=cycles_done,
         steady_measure=measure,
         nodes=(s_nodes, q_nodes, qd_nodes, w_nodes),
-        u_static=u_static,
+        u_static=run.u_static,
+        method=method,
+        elapsed_s=time.perf_counter() - start_time,
+        friction_law=model.friction,
+        reaction_force_N=reaction,
+    )
+
+
+@dataclass(frozen=True)
+class MarchRecord:
+    """A fixed-length time integration of :func:`march`, cycle by cycle.
+
+    **Fields:**
+
+    - `speed_rpm`, `omega_pinion` [rpm], [rad/s]; `mesh_period_s` ``T_m`` [s].
+    - `s`: the uniform mesh-phase grid of one cycle, shape ``(n,)``.
+    - `q`, `qd`: coordinates [m] and velocities [m/s] on that grid, shape ``(cycles, ndof, n)``;
+      cycle ``c`` covers ``t = (first_cycle + c + s) T_m``.
+    - `start_states`: ``(q, q')`` at mesh phase 0 of every cycle (Poincare samples), shape
+      ``(cycles, 2 ndof)``; `final_state`, `final_reaction_N`: what the next cycle starts from
+      (pass them back as `initial_state`, `reaction_N` to continue the run exactly).
+    - `dte_mean_um`, `dte_rms_um`, `dte_p2p_um`: per-cycle DTE read-outs, shape ``(cycles,)``
+      (mean and RMS by the quadrature rule of :func:`simulate`, peak-to-peak over its nodes
+      and the grid).
+    - `reaction_force_N`: output force used in every cycle (``"reaction"``; zeros otherwise).
+    - `cycles`: cycles integrated (fewer than asked when `stopped_early`); `first_cycle`.
+    - `u_static` [m]; `method`; `elapsed_s` [s]; `friction_law` used.
+    """
+
+    speed_rpm: float
+    omega_pinion: float
+    mesh_period_s: float
+    s: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    start_states: np.ndarray
+    final_state: np.ndarray
+    final_reaction_N: float
+    dte_mean_um: np.ndarray
+    dte_rms_um: np.ndarray
+    dte_p2p_um: np.ndarray
+    reaction_force_N: np.ndarray
+    cycles: int
+    first_cycle: int
+    stopped_early: bool
+    u_static: float
+    method: str
+    elapsed_s: float
+    friction_law: Any
+
+
+def march(
+    model,
+    omega_pinion: float,
+    cycles: int,
+    *,
+    initial_state=None,
+    reaction_N: float | None = None,
+    first_cycle: int = 0,
+    rtol: float = 1e-9,
+    atol: float | None = None,
+    method: str = "LSODA",
+    backend: str = "jax",
+    samples_per_cycle: int | None = None,
+    deflate_soft_mode: bool = False,
+    max_abs_dte_m: float | None = None,
+) -> MarchRecord:
+    r"""Integrate exactly `cycles` mesh periods, with no steady-state test, keeping every cycle.
+
+    The same piecewise integration as :func:`simulate` (one mechanism), for transients, growth
+    in unstable zones and fixed-length runs. By default the soft output mode of ``"spring"`` is
+    not deflated, so the response shows as it is; the ``"reaction"`` boundary always updates its
+    output force between cycles (it defines that boundary in time integration).
+
+    **Arguments:** as :func:`simulate`, and
+
+    - `cycles`: mesh periods to integrate (>= 1).
+    - `initial_state`: ``(q, q')`` at mesh phase 0, shape ``(2 ndof,)``; default quasi-static.
+    - `reaction_N`: output force of the first cycle (``"reaction"``; default quasi-static).
+    - `first_cycle`: index of the first cycle (time origin ``first_cycle T_m``), to continue a run.
+    - `max_abs_dte_m`: stop after the first cycle in which ``|delta|`` exceeds this [m].
+
+    **Returns:** a :class:`MarchRecord`.
+    """
+    start_time = time.perf_counter()
+    if int(cycles) < 1:
+        raise ConfigError("cycles", cycles, "an integer >= 1")
+    cycles = int(cycles)
+    run = _Integrator(model, omega_pinion, rtol=rtol, atol=atol, method=method, backend=backend,
+                      samples_per_cycle=samples_per_cycle, deflate_soft_mode=deflate_soft_mode)
+    model, ndof = run.model, run.ndof
+    kept: list[_Cycle] = []
+    starts = []
+    stopped = False
+    y = run.start_state(initial_state)
+    reaction = _initial_reaction(model, run.omega) if reaction_N is None else float(reaction_N)
+    for k in range(cycles):
+        starts.append(y)
+        done = run.run_cycle(y, first_cycle + k, reaction)
+        kept.append(done)
+        y, reaction = run.next_start(done)
+        if max_abs_dte_m is not None and max(np.max(np.abs(done.node_y[0])), np.max(np.abs(done.grid_y[0]))) > max_abs_dte_m:
+            stopped = k + 1 < cycles
+            break
+    final_state, final_reaction = y, reaction
+    delta_nodes = np.stack([c.node_y[0] for c in kept])
+    delta_grid = np.stack([c.grid_y[0] for c in kept])
+    mean = delta_nodes @ run.node_w
+    rms = np.sqrt(((delta_nodes - mean[:, None]) ** 2) @ run.node_w)
+    both = np.concatenate([delta_nodes, delta_grid], axis=1)
+    grid_y = np.stack([c.grid_y for c in kept])
+    omega = run.omega
+    return MarchRecord(
+        speed_rpm=omega * 30.0 / math.pi,
+        omega_pinion=omega,
+        mesh_period_s=run.tm,
+        s=run.grid_s,
+        q=grid_y[:, :ndof],
+        qd=grid_y[:, ndof:],
+        start_states=np.stack(starts),
+        final_state=final_state,
+        final_reaction_N=float(final_reaction),
+        dte_mean_um=1e6 * mean,
+        dte_rms_um=1e6 * rms,
+        dte_p2p_um=1e6 * np.ptp(both, axis=1),
+        reaction_force_N=np.array([c.reaction for c in kept]),
+        cycles=len(kept),
+        first_cycle=int(first_cycle),
+        stopped_early=stopped,
+        u_static=run.u_static,
         method=method,
         elapsed_s=time.perf_counter() - start_time,
         friction_law=model.friction,

@@ -142,3 +142,25 @@ def test_generalized_force_numpy_equals_jax(key, output):
     lin = model.generalized_force(s, q, qd, wp, part="linear", u_static=2.0)
     non = model.generalized_force(s, q, qd, wp, part="nonlinear", u_static=2.0)
     np.testing.assert_allclose(lin + non, f_np, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("coupling", ["LTI", "LTV", "NLTV"])
+@pytest.mark.parametrize("zeta", [0.001, 0.05])
+def test_mesh_damping_from_the_raw_config_numbers(coupling, zeta):
+    """``c = 2 zeta sqrt(k_mean m_e)`` (MODEL.md section 2) with ``m_e = 1/(R_bp^2/J_p + R_bg^2/J_g)``
+    from the module, tooth numbers, pressure angle and inertias; read off the mesh force."""
+    model = model_for(coupling=coupling, law="none", damping_ratio=zeta)
+    module_m, phi = 3.175e-3, math.radians(20.0)  # BASE and the default pressure angle
+    rbp, rbg = module_m * 25 * math.cos(phi) / 2, module_m * 31 * math.cos(phi) / 2
+    m_e = 1.0 / (rbp**2 / 1.0594e-3 + rbg**2 / 2.5047e-3)
+    assert m_e == pytest.approx(0.4615, abs=5e-4)  # MODEL.md section 1
+    c = 2 * zeta * math.sqrt(568e6 * m_e)
+    assert float(model.mesh_damping_Ns_per_m) == pytest.approx(c, rel=1e-12)
+    # the damping the equations use: dF_mesh/d(delta') at phases in double and single contact
+    s = np.array([0.1, 0.3, 0.6, 0.9])
+    omega = 1000.0 * math.pi / 30
+    q = np.zeros((model.ndof, s.size))
+    qd = np.zeros_like(q)
+    qd[0] = 1.0
+    slope = np.asarray(model.mesh_force(s, q, qd, omega)) - np.asarray(model.mesh_force(s, q, 0 * qd, omega))
+    np.testing.assert_allclose(slope, c, rtol=1e-12)

@@ -1,4 +1,5 @@
-"""Time integration (hbgear.simulate): energy balance, linear closed form, tolerance, steady state."""
+"""Time integration (hbgear.simulate): energy balance, linear closed form, tolerance, steady state,
+fixed-length marching, the reaction boundary against harmonic balance."""
 
 import math
 
@@ -8,7 +9,9 @@ import pytest
 from hbgear.build import build_model
 from hbgear.config import parse_config
 from hbgear.errors import ConvergenceError
-from hbgear.simulate import _steady_period, simulate
+from hbgear.simulate import _steady_period, march, simulate
+from hbgear.solve import solve_periodic
+from hbgear.stability import multipliers_linear
 
 BASE = {
     "gear": dict(teeth_pinion=25, teeth_gear=31, module_mm=3.175, contact_ratio=1.433,
@@ -115,6 +118,92 @@ def test_simulate_command_writes_outputs(tmp_path):
     assert rows[0][:5] == ["time_s", "mesh_phase", "dte_um", "dte_velocity_m_per_s", "mesh_force_N"]
     assert "pair2_sliding_velocity_m_per_s" in rows[0] and len(rows) > 100
     assert (tmp_path / "ok" / "timeseries.png").stat().st_size > 1000
+    # the reaction boundary runs too (it was rejected before) and reports its output torque
+    assert cli.main(common + ["--set", "boundary.output='reaction'", "--out", str(tmp_path / "reaction")]) == 0
+    reaction = json.loads((tmp_path / "reaction" / "summary.json").read_text())
+    assert reaction["output_torque_Nm"] == pytest.approx(226.0 * 31 / 25, rel=2e-2)
+    assert reaction["output_torque_Nm"] != pytest.approx(226.0 * 31 / 25, rel=1e-3)  # less the friction torque
     # too few cycles: exit 1, nothing written
     assert cli.main(common + ["--cycles", "3", "--out", str(tmp_path / "bad")]) == 1
     assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
+
+
+# ----------------------------------------------------------------------------- march
+
+
+def test_march_continued_equals_one_run():
+    """N cycles, then N more from the returned state (and output force), equal 2N at once."""
+    model = model_for(friction=dict(law="arctan", v0_m_per_s=0.01, model="NLTV"), boundary=dict(output="reaction"))
+    whole = march(model, OMEGA, 6)
+    first = march(model, OMEGA, 3)
+    second = march(model, OMEGA, 3, initial_state=first.final_state, reaction_N=first.final_reaction_N,
+                   first_cycle=3)
+    np.testing.assert_allclose(np.concatenate([first.q, second.q]), whole.q, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(np.concatenate([first.reaction_force_N, second.reaction_force_N]),
+                               whole.reaction_force_N, rtol=1e-14)
+    np.testing.assert_allclose(second.final_state, whole.final_state, rtol=1e-12, atol=1e-18)
+    assert whole.cycles == 6 and not whole.stopped_early
+    # the output force moves from its quasi-static start as the dynamic friction settles
+    assert whole.reaction_force_N[0] != whole.reaction_force_N[-1]
+
+
+def test_march_settles_on_the_simulated_steady_state():
+    model = model_for(boundary=dict(output="torques"))
+    steady = simulate(model, OMEGA, period_cycles=(1,))
+    run = march(model, OMEGA, steady.cycles + 10)
+    assert run.dte_rms_um[-1] == pytest.approx(steady.summary["dte_rms_um"], rel=1e-6)
+    assert run.dte_p2p_um[-1] == pytest.approx(steady.summary["dte_p2p_um"], rel=1e-6)
+    assert run.dte_mean_um[-1] == pytest.approx(steady.summary["dte_mean_um"], rel=1e-8)
+    # the transient from the static state: the first cycle differs clearly
+    assert abs(run.dte_p2p_um[0] / steady.summary["dte_p2p_um"] - 1) > 1e-2
+    np.testing.assert_allclose(run.q[-1, 0], steady.q[0, -run.s.size:], rtol=0, atol=1e-6 * np.ptp(steady.q[0]))
+
+
+def test_march_grows_at_the_monodromy_multiplier():
+    """LTV-A in the primary parametric zone (w_m ~ 2 w_n): the deviation from the (unstable)
+    periodic solution grows by the exact Floquet multiplier every mesh cycle."""
+    model = model_for(mesh=dict(damping_ratio=0.01), boundary=dict(output="torques"))
+    omega = 26800.0 * math.pi / 30
+    mult = multipliers_linear(model, omega)
+    lead = mult[np.argmax(np.abs(mult))]
+    assert abs(lead) > 1.2 and abs(lead.imag) < 1e-12
+    run = march(model, omega, 50)
+    # successive Poincare differences remove the periodic solution: d_n ~ lead^n
+    diffs = np.diff(run.start_states, axis=0)
+    np.testing.assert_allclose(diffs[-10:] / diffs[-11:-1], lead.real, rtol=1e-6)
+    assert run.dte_p2p_um[-1] / run.dte_p2p_um[-11] == pytest.approx(abs(lead) ** 10, rel=1e-4)
+
+
+def test_march_stops_at_the_dte_limit():
+    model = model_for(mesh=dict(damping_ratio=0.01), boundary=dict(output="torques"))
+    run = march(model, 26800.0 * math.pi / 30, 200, max_abs_dte_m=1e-3)
+    assert run.stopped_early and run.cycles < 200
+    assert np.max(np.abs(run.q[-1, 0])) > 1e-3 >= np.max(np.abs(run.q[-2, 0]))
+
+
+# ----------------------------------------------------------------------------- reaction boundary
+
+
+@pytest.mark.parametrize("coupling", ["LTV", "NLTV"])
+def test_reaction_boundary_matches_harmonic_balance(coupling):
+    """Free output inertia with a constant output torque fixed by periodicity: TI against HB."""
+    model = model_for(friction=dict(law="arctan", v0_m_per_s=0.01, model=coupling), boundary=dict(output="reaction"))
+    ti = simulate(model, OMEGA, period_cycles=(1,))
+    hb = solve_periodic(model, OMEGA, harmonics=64, samples=1024)
+    hs, ts = hb.summary(), ti.summary
+    close = 1e-5 if coupling == "LTV" else 1e-4  # NLTV: HB truncation of the arctan friction
+    assert ts["dte_rms_um"] == pytest.approx(hs["dte_rms_um"], rel=close)
+    assert ts["dte_p2p_um"] == pytest.approx(hs["dte_p2p_um"], rel=5 * close)
+    assert ts["dte_mean_um"] == pytest.approx(hs["dte_mean_um"], rel=close)
+    assert ti.reaction_force_N == pytest.approx(hb.reaction_force_N, rel=close / 10)
+    # the output force is not the input's rigid balance T_p/R_bp: the mean friction torques enter
+    assert abs(ti.reaction_force_N / model.normal_load_N - 1) > 1e-3
+    # energy balance of the steady period: loss = friction loss + mesh power
+    assert ts["mean_friction_loss_W"] > 900.0
+    balance = ts["mean_friction_loss_W"] + ts["mean_mesh_power_W"]
+    assert ts["mean_power_loss_W"] == pytest.approx(balance, rel=1e-7)
+    assert ts["mean_power_loss_W"] == pytest.approx(hs["mean_power_loss_W"], rel=10 * close)
+    # the rigid-body drift is removed: the gear turns at its nominal speed on average
+    s, q, qd, w = ti.nodes
+    assert abs(np.sum(w * qd[1])) < 1e-9 * model.base_radius_gear_m * OMEGA * 25 / 31
+

@@ -24,13 +24,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from hbgear import stability as st
 from hbgear.build import build_model
 from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
-from hbgear.simulate import _initial_state, _make_rhs, _prepared_model
+from hbgear.simulate import march
 from hbgear.solve import rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 
 HERE = Path(__file__).resolve().parent
@@ -69,54 +68,16 @@ def unstable_zones(model, rpm_lo=1440.0, rpm_hi=1520.0, steps=1601):
     return zones
 
 
-def march(model, omega, cycles, *, samples_per_cycle=64, rtol=1e-9, blowup=BLOWUP_M):
+def run_fixed(model, omega, cycles, *, samples_per_cycle=64):
     """DTE over up to `cycles` mesh periods from the quasi-static state, with no steady-state test.
 
-    The right-hand side, start state and breakpoints are those of :func:`hbgear.simulate.simulate`
-    (LSODA, segment by segment between the switching phases), but the whole record is kept and
-    the soft mode is not deflated, so a growing or slowly settling response shows as it is.
-    Stops early once ``|delta| > blowup``. Returns ``(delta [m], shape (cycles, samples),
-    poincare states at phase 0, shape (cycles, 2 ndof))``.
+    :func:`hbgear.simulate.march` (the integration of :func:`hbgear.simulate.simulate`, whole
+    record kept, soft mode not deflated, so a growing or slowly settling response shows as it
+    is), stopped once ``|delta| > BLOWUP_M``. Returns ``(delta [m], shape (cycles, samples),
+    Poincare states at phase 0, shape (cycles, 2 ndof), per-cycle p2p [um], per-cycle RMS [um])``.
     """
-    model = _prepared_model(model)
-    _, _, wm = model.speeds(omega)
-    tm = 2 * math.pi / wm
-    n = model.ndof
-    minv = np.linalg.inv(np.asarray(model.mass_matrix(), float))
-    u_static = float(model.static_state(omega)[1])
-    rhs, jac = _make_rhs(model, omega, u_static, minv, "jax", True)
-    edges = np.concatenate([np.asarray(model.phase_breakpoints(), float), [1.0]])
-    grid = np.arange(samples_per_cycle) / samples_per_cycle
-    k_mean = float(model.k_mean_N_per_m)
-    wn = math.sqrt(k_mean / float(model.mass_equivalent_kg))
-    atol = rtol * float(model.normal_load_N) / k_mean
-    atol = np.concatenate([np.full(n, atol), np.full(n, atol * wn)])
-    y = _initial_state(model, omega, u_static, edges[0] + 1e-12)
-    dte = np.full((cycles, samples_per_cycle), np.nan)
-    poincare = np.full((cycles, 2 * n), np.nan)
-    for c in range(cycles):
-        poincare[c] = y
-        for a, b in zip(edges[:-1], edges[1:]):
-            if b - a <= 0.0:
-                continue
-            lo, hi = a + 1e-12, b - 1e-12
-
-            def f(t, yy, a=a, lo=lo, hi=hi):
-                return rhs(min(max(a + t / tm, lo), hi), yy)
-
-            def j(t, yy, a=a, lo=lo, hi=hi):
-                return jac(min(max(a + t / tm, lo), hi), yy)
-
-            idx = np.nonzero((grid >= a) & (grid < b))[0]
-            t_eval = np.concatenate([(grid[idx] - a) * tm, [(b - a) * tm]])
-            sol = solve_ivp(f, (0.0, (b - a) * tm), y, method="LSODA", t_eval=t_eval, rtol=rtol, atol=atol, jac=j)
-            if not sol.success:
-                raise ConvergenceError(f"time integration at {rad_s_to_rpm(omega):.6g} rpm, cycle {c}: {sol.message}")
-            dte[c, idx] = sol.y[0, :-1]
-            y = sol.y[:, -1].copy()
-        if np.nanmax(np.abs(dte[c])) > blowup:
-            return dte[: c + 1], poincare[: c + 1]
-    return dte, poincare
+    rec = march(model, omega, cycles, samples_per_cycle=samples_per_cycle, max_abs_dte_m=BLOWUP_M)
+    return rec.q[:, 0, :], rec.start_states, rec.dte_p2p_um, rec.dte_rms_um
 
 
 def nltv_scan(ltv, nltv, rpms, harmonics):
@@ -134,10 +95,6 @@ def nltv_scan(ltv, nltv, rpms, harmonics):
             z = None
             rows.append((float(rpm), m_ltv, None, complex(np.nan), str(exc).split(":")[0] + ": no convergence"))
     return rows
-
-
-def per_cycle(dte):
-    return 1e6 * np.ptp(dte, axis=1), 1e6 * np.std(dte, axis=1)
 
 
 def main(cycles_a: int = 60, cycles_b: int = 400, harmonics: int = 64):
@@ -171,11 +128,9 @@ def main(cycles_a: int = 60, cycles_b: int = 400, harmonics: int = 64):
     t0 = time.perf_counter()
     rpm_a = zone["A"][4]
     om_a = rpm_to_rad_s(rpm_a)
-    d_la, _ = march(ltv_a, om_a, cycles_a)
-    d_na, _ = march(nltv_a, om_a, cycles_a)
+    d_la, _, p_la, _ = run_fixed(ltv_a, om_a, cycles_a)
+    d_na, _, p_na, _ = run_fixed(nltv_a, om_a, cycles_a)
     timings[f"TI at {rpm_a:.1f} rpm (A)"] = time.perf_counter() - t0
-    p_la, _ = per_cycle(d_la)
-    p_na, _ = per_cycle(d_na)
 
     def rate(p):  # growth per mesh cycle over the second half of the record
         h = len(p) // 2
@@ -191,11 +146,9 @@ def main(cycles_a: int = 60, cycles_b: int = 400, harmonics: int = 64):
         ltv, nltv = (ltv_b, nltv_b) if f == "B" else (ltv_a, nltv_a)
         om_b = rpm_to_rad_s(rpm_b)
         t0 = time.perf_counter()
-        d_lb, _ = march(ltv, om_b, cycles_b)
-        d_nb, pc_nb = march(nltv, om_b, cycles_b)
+        d_lb, _, p_lb, _ = run_fixed(ltv, om_b, cycles_b)
+        d_nb, pc_nb, p_nb, r_nb = run_fixed(nltv, om_b, cycles_b)
         timings[f"TI at {rpm_b:.2f} rpm ({f})"] = time.perf_counter() - t0
-        p_lb, _ = per_cycle(d_lb)
-        p_nb, r_nb = per_cycle(d_nb)
         hb_sum = hb.summary()
         # window of the last 160 cycles (about one period of the slowly decaying soft mode)
         w = min(160, len(p_nb) // 2)
@@ -366,7 +319,7 @@ Timings: {', '.join(f'{k} {v:.0f} s' for k, v in timings.items())}; total {t_tot
 
 
 def res_b_hb_delta0(hb):
-    """HB DTE [m] at mesh phase 0 (the Poincare section of :func:`march`)."""
+    """HB DTE [m] at mesh phase 0 (the Poincare section of :func:`run_fixed`)."""
     return hb.state_at(np.array([0.0]))[0][0, 0]
 
 

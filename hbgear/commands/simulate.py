@@ -3,7 +3,8 @@
 Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 
 - `summary.json`: `speed_rpm`, the :data:`hbgear.metrics.SUMMARY_KEYS`, `cycles_integrated`,
-  `period_mesh_cycles`, `steady_measure`, the integrator settings, a model description and the
+  `period_mesh_cycles`, `steady_measure`, `output_torque_Nm` (``"reaction"`` boundary: the mean
+  output torque fixed by periodicity), the integrator settings, a model description and the
   configuration (TOML keys and units);
 - `timeseries.csv`: the last recorded steady cycles on a uniform grid -- `time_s, mesh_phase,
   dte_um, dte_velocity_m_per_s, mesh_force_N` and, per pair slot ``k`` (``pair1`` entered at
@@ -117,6 +118,8 @@ def run(config, args, out_dir) -> int:
     )
     summary = {"speed_rpm": args.speed, "mesh_freq_hz": args.speed / 60.0 * model.teeth_pinion}
     summary |= res.summary
+    if model.boundary == "reaction":  # the output torque periodicity fixed
+        summary["output_torque_Nm"] = res.reaction_force_N * float(model.base_radius_gear_m)
     summary |= {
         "cycles_integrated": res.cycles,
         "period_mesh_cycles": res.period_cycles,
