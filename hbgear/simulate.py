@@ -642,6 +642,8 @@ class MarchRecord:
       (mean and RMS by the quadrature rule of :func:`simulate`, peak-to-peak over its nodes
       and the grid).
     - `reaction_force_N`: output force used in every cycle (``"reaction"``; zeros otherwise).
+    - `last_summary`: :func:`~hbgear.metrics.periodic_summary` over the last cycle (means over
+      that cycle; a power balance only once the run has settled).
     - `cycles`: cycles integrated (fewer than asked when `stopped_early`); `first_cycle`.
     - `u_static` [m]; `method`; `elapsed_s` [s]; `friction_law` used.
     """
@@ -659,6 +661,7 @@ class MarchRecord:
     dte_rms_um: np.ndarray
     dte_p2p_um: np.ndarray
     reaction_force_N: np.ndarray
+    last_summary: dict
     cycles: int
     first_cycle: int
     stopped_early: bool
@@ -729,6 +732,10 @@ def march(
     both = np.concatenate([delta_nodes, delta_grid], axis=1)
     grid_y = np.stack([c.grid_y for c in kept])
     omega = run.omega
+    last = kept[-1]
+    last_summary = {k: float(v) for k, v in periodic_summary(
+        model, omega, run.node_s, last.node_y[:ndof], last.node_y[ndof:], run.node_w, run.u_static, last.reaction).items()}
+    last_summary["mean_mesh_power_W"] -= last.kick_work / run.tm  # LTI impulses, as in simulate
     return MarchRecord(
         speed_rpm=omega * 30.0 / math.pi,
         omega_pinion=omega,
@@ -743,6 +750,7 @@ def march(
         dte_rms_um=1e6 * rms,
         dte_p2p_um=1e6 * np.ptp(both, axis=1),
         reaction_force_N=np.array([c.reaction for c in kept]),
+        last_summary=last_summary,
         cycles=len(kept),
         first_cycle=int(first_cycle),
         stopped_early=stopped,

@@ -1,4 +1,4 @@
-"""`hbgear simulate CONFIG --speed RPM [--cycles N]`: time integration to steady state.
+"""`hbgear simulate CONFIG --speed RPM [--cycles N] [--march]`: time integration to steady state.
 
 Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 
@@ -11,6 +11,12 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
   the start of the current mesh period, ``pair2`` one period earlier), `pairK_normal_load_N,
   pairK_mu, pairK_friction_force_N, pairK_sliding_velocity_m_per_s`;
 - `timeseries.png`: DTE, mesh force and per-pair normal and friction forces.
+
+With `--march` exactly `--cycles` mesh cycles are integrated from the static state with no
+steady-state test (:func:`hbgear.simulate.march`: transients, growth in unstable zones): the
+summary keys are then means over the last cycle (`"mode": "march"`, plus
+`dte_p2p_growth_per_cycle` over the last up to 20 cycles), the time series holds the last two
+cycles, and `cycles.csv` the per-cycle `cycle, dte_mean_um, dte_rms_um, dte_p2p_um`.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from ..build import build_model
 from ..cli import Command, positive_float, positive_int, register
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from ..model import PAIR_SLOTS
-from ..simulate import simulate
+from ..simulate import march, simulate
 
 __all__ = ["SIMULATE", "run", "timeseries_table", "plot_timeseries"]
 
@@ -36,6 +42,10 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--cycles", type=positive_int("--cycles", "a positive number of mesh cycles"), default=None,
         metavar="N", help="maximum number of mesh cycles to integrate (default: [simulate] cycles)",
+    )
+    parser.add_argument(
+        "--march", action="store_true",
+        help="integrate exactly --cycles mesh cycles, no steady-state test (writes cycles.csv too)",
     )
 
 
@@ -73,7 +83,7 @@ def timeseries_table(res):
     return header, np.column_stack(columns)
 
 
-def plot_timeseries(res):
+def plot_timeseries(res, title=None):
     """Figure: DTE; mesh force and per-pair normal loads; per-pair friction forces."""
     import matplotlib
 
@@ -96,18 +106,74 @@ def plot_timeseries(res):
         ax.legend(fontsize=8, loc="upper right")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.suptitle(
+    fig.suptitle(title or (
         f"{res.speed_rpm:.6g} rpm: steady state after {res.cycles} mesh cycles "
         f"(period {res.period_cycles} mesh cycle{'s' if res.period_cycles > 1 else ''})"
-    )
+    ))
     fig.tight_layout()
     return fig
+
+
+def _last_cycles(model, rec, count: int = 2):
+    """The last `count` cycles of a :class:`~hbgear.simulate.MarchRecord` as the fields
+    :func:`timeseries_table` and :func:`plot_timeseries` read."""
+    from types import SimpleNamespace
+
+    count = min(count, rec.cycles)
+    first = rec.first_cycle + rec.cycles - count
+    s = np.concatenate([rec.s] * count)
+    t = np.concatenate([(first + k + rec.s) * rec.mesh_period_s for k in range(count)])
+    q = np.concatenate(list(rec.q[-count:]), axis=1)
+    qd = np.concatenate(list(rec.qd[-count:]), axis=1)
+    omega = rec.omega_pinion
+    pairs = {k: np.asarray(v) for k, v in model.pair_friction(s, q, qd, omega).items()}
+    return SimpleNamespace(t=t, s=s, q=q, qd=qd, mesh_force=np.asarray(model.mesh_force(s, q, qd, omega)), pairs=pairs,
+                           speed_rpm=rec.speed_rpm)
+
+
+def run_march(config, args, out_dir, model, cycles) -> int:
+    """`--march`: exactly `cycles` mesh cycles from the static state (see the module docstring)."""
+    sim = config.simulate
+    rec = march(model, args.speed * math.pi / 30.0, int(cycles), rtol=sim.rtol, atol=sim.atol_m)
+    window = min(20, rec.cycles - 1)
+    growth = float((rec.dte_p2p_um[-1] / rec.dte_p2p_um[-1 - window]) ** (1.0 / window)) if window > 0 else float("nan")
+    summary = {"speed_rpm": args.speed, "mesh_freq_hz": args.speed / 60.0 * model.teeth_pinion, "mode": "march"}
+    summary |= rec.last_summary
+    if model.boundary == "reaction":
+        summary["output_torque_Nm"] = float(rec.reaction_force_N[-1]) * float(model.base_radius_gear_m)
+    summary |= {
+        "cycles_integrated": rec.cycles,
+        "dte_p2p_growth_per_cycle": growth,
+        "integrator": {"method": rec.method, "rtol": sim.rtol, "atol_m": sim.atol_m, "cycles": int(cycles)},
+        "elapsed_s": rec.elapsed_s,
+        "model": model_description(model) | {"friction_law_integrated": repr(rec.friction_law),
+                                              "u_static_m": rec.u_static},
+        "config": config.to_dict(),
+    }
+    write_csv_atomic(out_dir / "cycles.csv", ["cycle", "dte_mean_um", "dte_rms_um", "dte_p2p_um"],
+                     np.column_stack([rec.first_cycle + np.arange(rec.cycles), rec.dte_mean_um, rec.dte_rms_um,
+                                      rec.dte_p2p_um]))
+    last = _last_cycles(model, rec)
+    header, rows = timeseries_table(last)
+    write_csv_atomic(out_dir / "timeseries.csv", header, rows)
+    fig = plot_timeseries(last, title=f"{rec.speed_rpm:.6g} rpm: last cycles of {rec.cycles} from the static state "
+                                      f"(p2p growth {growth:.4f} per cycle)")
+    try:
+        save_figure_atomic(fig, out_dir / "timeseries.png", dpi=120)
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    write_json_atomic(out_dir / "summary.json", summary)
+    return 0
 
 
 def run(config, args, out_dir) -> int:
     model = build_model(config)
     sim = config.simulate
     cycles = args.cycles if args.cycles is not None else sim.cycles
+    if getattr(args, "march", False):
+        return run_march(config, args, out_dir, model, cycles)
     res = simulate(
         model,
         args.speed * math.pi / 30.0,
@@ -147,7 +213,8 @@ def run(config, args, out_dir) -> int:
 SIMULATE = register(
     Command(
         name="simulate",
-        help="time integration to steady state at one speed (summary.json, timeseries.csv/.png)",
+        help="time integration to steady state at one speed (summary.json, timeseries.csv/.png); "
+             "--march: a fixed number of cycles",
         add_arguments=add_arguments,
         run=run,
     )
