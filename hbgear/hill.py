@@ -1,0 +1,373 @@
+r"""Hill's method: the central Floquet exponents of the quadratic Hill eigenproblem.
+
+With ``mu = lam / w`` (``w`` the base frequency) the linearised harmonic-balance problem is
+
+    P(mu) v = (A0 + mu A1 + mu^2 A2) v = 0,    A0 = J,  A1 = w D1,  A2 = w^2 D2
+
+(:meth:`hbgear.hb.HarmonicBalance.hill_matrices`), of size ``N = n (2H+1)``. Its ``2N``
+eigenvalues come in families ``mu + i k`` (copies: the same Floquet multiplier
+``exp(2 pi mu)``); of every family the member whose eigenvector is most concentrated on the
+central harmonics is the Floquet exponent (Lazarus & Thomas 2010). Two ways to get them, with
+the same result:
+
+- **dense** (:func:`dense_central`): all eigenpairs of the companion linearisation, batched over
+  points (one stacked :func:`numpy.linalg.eig`), then :func:`select_central`: the candidates
+  sorted by ``|centre|`` (:func:`harmonic_centre`), a copy of a multiplier already taken
+  skipped, until ``2n`` are found.
+- **refined** (:func:`refined_central`, for large ``N``): the same selection on the Galerkin
+  sub-problem of the harmonics ``|k| <= Hs`` (the rows and columns of those harmonics; small
+  and cheap), each pick refined on the full problem by inverse iteration with the Rayleigh
+  functional (quadratic convergence, one LU per step), then walked along its family
+  (``mu -> mu +- i``, eigenvector shifted by one harmonic) while ``|centre|`` decreases: the
+  centre falls by one per copy, so a local minimum along the family is the family's most
+  central member, the one the dense selection keeps. It returns ``None`` (the caller then uses
+  the dense way) unless every refinement converged and ``2n`` distinct families were found.
+
+With a free mean coordinate (reaction boundary) the exponent 0 is a Jordan block (``u = const``,
+``u = t``); the (at most two) exponents within ``zero_tol`` of 0 are dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+from threadpoolctl import ThreadpoolController
+
+__all__ = [
+    "dense_central",
+    "harmonic_centre",
+    "hill_quadratic",
+    "refined_central",
+    "select_central",
+    "central_exponents",
+]
+
+#: Use the refined way above this many unknowns ``N = n (2H+1)`` (companion ``2N``): below it
+#: the full eigen-decomposition of a stack of small companions is cheaper than the iterations.
+REFINE_MIN_SIZE = 48
+
+#: Half-width of the harmonic window of the sub-problem that seeds the refinement.
+SEED_HARMONICS = 8
+
+#: Copy tolerance (relative, on multipliers) of the seed selection: in the small sub-problem the
+#: two members ``a +- i/2`` of a real negative multiplier's family differ by up to ~1e-4, so
+#: the default ``1e-6`` would seed that family twice and miss another one.
+SEED_COPY_TOL = 1e-3
+
+_BLAS_CONTROLLER: list = []
+
+
+def single_thread_blas():
+    """Context limiting BLAS to one thread; the controller scans the libraries once (a fresh
+    ``threadpool_limits`` rescans them: ~1 ms per call, more than a small eigenproblem)."""
+    if not _BLAS_CONTROLLER:
+        _BLAS_CONTROLLER.append(ThreadpoolController())
+    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
+
+
+# ============================================================================ the matrices
+
+_BATCHED: dict = {}
+
+
+def hill_quadratic(hb, zs, ps, system, chunk: int = 32):
+    """``(A0, A1, A2)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``, shapes ``(m, N, N)``.
+
+    One jitted, vmapped :meth:`~hbgear.hb.HarmonicBalance.hill_matrices` call per `chunk`
+    points (the last chunk padded, so one compilation serves every curve length).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    zs = np.atleast_2d(np.asarray(zs, dtype=float))
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    fn = _BATCHED.get(hb)
+    if fn is None:
+        fn = _BATCHED[hb] = jax.jit(jax.vmap(hb._hill_matrices_jit, in_axes=(0, 0, None, None)))
+    quad = hb.quadrature(system)
+    m = len(ps)
+    size = min(chunk, m)
+    parts = []
+    for lo in range(0, m, size):
+        idx = np.minimum(np.arange(lo, lo + size), m - 1)
+        jz, d1, d2 = fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, quad)
+        keep = min(size, m - lo)
+        parts.append([np.asarray(x, dtype=float)[:keep] for x in (jz, d1, d2)])
+    a0, d1, d2 = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    w = np.array([float(hb.base_frequency(system, p)) for p in ps])
+    return a0, w[:, None, None] * d1, (w * w)[:, None, None] * d2, w
+
+
+# ============================================================================ selection
+
+
+def harmonic_centre(vectors: np.ndarray, ndof: int, harmonics: int) -> np.ndarray:
+    """Energy-weighted mean signed harmonic index of each eigenvector (columns).
+
+    `vectors`: shape ``(..., N, k)`` in the real basis ``[a0, a1, b1, a2, b2, ...]`` per
+    coordinate; ``a cos + b sin`` carries ``|a - i b|^2 / 4`` on ``e^{+ik tau}`` and
+    ``|a + i b|^2 / 4`` on ``e^{-ik tau}``. Returns shape ``(..., k)``.
+    """
+    block = 2 * harmonics + 1
+    lead = vectors.shape[:-2]
+    v = vectors.reshape(lead + (ndof, block, vectors.shape[-1]))
+    a, b = v[..., 1::2, :], v[..., 2::2, :]
+    plus = np.sum(np.abs(a - 1j * b) ** 2, axis=-3) / 4.0  # (..., H, k)
+    minus = np.sum(np.abs(a + 1j * b) ** 2, axis=-3) / 4.0
+    zero = np.sum(np.abs(v[..., 0, :]) ** 2, axis=-2)
+    k = np.arange(1, harmonics + 1)[:, None]
+    total = zero + plus.sum(axis=-2) + minus.sum(axis=-2)
+    return (k * (plus - minus)).sum(axis=-2) / np.maximum(total, 1e-300)
+
+
+#: Tie-break of the centrality: an eigenpair and its conjugate have exactly opposite centres,
+#: and for a real negative multiplier they are two copies (``a +- i/2``) of one family; the
+#: one with ``Im mu >= 0`` is preferred, so the choice does not depend on rounding.
+_TIE = 1e-9
+
+
+def centrality(mu, centre):
+    """Sort key of the selection: ``|centre|``, ties between conjugates to ``Im mu >= 0``."""
+    return np.abs(centre) - _TIE * np.where(np.imag(mu) >= 0.0, 1.0, -1.0)
+
+
+#: ``|2 Im mu - round(2 Im mu)|`` below this: the family of ``mu`` is its own conjugate (a real
+#: multiplier), so the conjugate eigenpair is one of its copies however far the truncated
+#: problem has moved the two apart (at H = 32 their multipliers can differ by more than 1e-6).
+SELF_CONJUGATE_TOL = 1e-5
+
+
+def _is_self_conjugate(mu: complex, tol: float = SELF_CONJUGATE_TOL) -> bool:
+    """``mu`` and ``conj(mu)`` in one family: ``Im mu`` a multiple of 1/2."""
+    return abs(2.0 * mu.imag - round(2.0 * mu.imag)) <= tol
+
+
+def _is_copy(mu_i, m_i, taken_mu, taken_mult, copy_tol) -> bool:
+    """``mu_i`` a copy of a taken exponent: the same multiplier (to `copy_tol`), or the exact
+    conjugate of a taken exponent of a self-conjugate family."""
+    for mu_j, m_j in zip(taken_mu, taken_mult):
+        if abs(m_i - m_j) <= copy_tol * max(1.0, abs(m_j)):
+            return True
+        if abs(mu_i - np.conj(mu_j)) <= 1e-12 * max(1.0, abs(mu_j)) and _is_self_conjugate(mu_j):
+            return True
+    return False
+
+
+def _trivial(mu: np.ndarray, zero_tol: float) -> list[int]:
+    """Indices of the (at most two) exponents within `zero_tol` of 0."""
+    return [int(i) for i in np.argsort(np.abs(mu))[:2] if abs(mu[i]) < zero_tol]
+
+
+def select_central(mu, centre, need: int, *, zero_tol: float | None = None, copy_tol: float = 1e-6):
+    """Indices of the ``need`` central exponents among the candidates ``mu`` (one point).
+
+    Candidates by increasing ``|centre|`` (:func:`centrality`); one whose multiplier ``exp(2 pi mu)`` equals (to
+    `copy_tol`) one already taken is a copy and skipped, and so is the conjugate of a taken
+    exponent of a self-conjugate family (the tie at half-integer centres of a real negative
+    multiplier, where ``sigma +- i/2`` belong to one family, whatever their distance); if fewer
+    than ``need`` are found, repeated multipliers are filled in from the skipped ones. With
+    `zero_tol`, the (at most two) exponents within it of 0 are dropped first (and ``need``
+    lowered by their number).
+
+    **Returns:** ``(indices, trivial, filled)``: the picks, how many trivial exponents were
+    dropped, and whether a skipped candidate had to be filled in.
+    """
+    mu = np.asarray(mu)
+    mult = np.exp(2.0 * np.pi * mu)
+    near_zero = _trivial(mu, zero_tol) if zero_tol is not None else []
+    seen_mu, seen = list(mu[near_zero]), list(mult[near_zero])
+    skip = set(near_zero)
+    want = need - len(near_zero)
+    taken: list[int] = []
+    skipped: list[int] = []
+    for i in np.argsort(centrality(mu, centre), kind="stable"):
+        if len(taken) == want:
+            break
+        if i in skip:
+            continue
+        if _is_copy(mu[i], mult[i], seen_mu, seen, copy_tol):
+            skipped.append(int(i))
+            continue
+        taken.append(int(i))
+        seen_mu.append(mu[i])
+        seen.append(mult[i])
+    filled = False
+    for i in skipped:  # genuinely repeated multipliers
+        if len(taken) == want:
+            break
+        taken.append(i)
+        filled = True
+    return np.asarray(taken, dtype=int), len(near_zero), filled
+
+
+# ============================================================================ dense
+
+
+def _companion(a0, a1, a2):
+    """``C = [[0, I], [-A2^-1 A0, -A2^-1 A1]]`` with ``C (v, mu v) = mu (v, mu v)``, batched."""
+    m, size = a0.shape[0], a0.shape[-1]
+    rhs = np.linalg.solve(a2, np.concatenate([a0, a1], axis=-1))
+    comp = np.zeros((m, 2 * size, 2 * size))
+    comp[:, :size, size:] = np.eye(size)
+    comp[:, size:] = -rhs
+    return comp
+
+
+def dense_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+    """Central exponents ``mu`` of every point (a list of arrays) from all eigenpairs."""
+    with single_thread_blas():
+        # threads only add synchronisation to eigenproblems this small
+        mu, vec = np.linalg.eig(_companion(a0, a1, a2))
+    size = a0.shape[-1]
+    centre = harmonic_centre(vec[:, :size], ndof, harmonics)
+    out = []
+    for k in range(len(mu)):
+        idx, _, _ = select_central(mu[k], centre[k], 2 * ndof, zero_tol=zero_tol, copy_tol=copy_tol)
+        out.append(mu[k][idx])
+    return out
+
+
+# ============================================================================ refined
+
+
+def _window(ndof: int, harmonics: int, seed: int) -> np.ndarray:
+    """Indices of the harmonics ``0..seed`` (cos and sin) of every coordinate in the full vector."""
+    block = 2 * harmonics + 1
+    return (np.arange(ndof)[:, None] * block + np.arange(2 * seed + 1)[None]).ravel()
+
+
+def _shift_harmonics(v: np.ndarray, ndof: int, harmonics: int, k: int) -> np.ndarray:
+    """The eigenvector of the copy ``mu + i k`` from that of ``mu``: complex harmonic ``j`` of
+    the periodic factor moves to ``j - k`` (``e^{(mu + ik) tau} p'(tau) = e^{mu tau} p(tau)``)."""
+    block = 2 * harmonics + 1
+    x = v.reshape(ndof, block)
+    c = np.zeros((ndof, 2 * harmonics + 1), dtype=complex)  # complex coefficients, index j + H
+    c[:, harmonics] = x[:, 0]
+    c[:, harmonics + 1 :] = (x[:, 1::2] - 1j * x[:, 2::2]) / 2.0
+    c[:, harmonics - 1 :: -1] = (x[:, 1::2] + 1j * x[:, 2::2]) / 2.0
+    c = np.roll(c, -k, axis=1)
+    if k > 0:
+        c[:, -k:] = 0.0
+    elif k < 0:
+        c[:, :-k] = 0.0
+    out = np.empty_like(x, dtype=complex)
+    out[:, 0] = c[:, harmonics]
+    pos, neg = c[:, harmonics + 1 :], c[:, harmonics - 1 :: -1]
+    out[:, 1::2] = pos + neg
+    out[:, 2::2] = 1j * (pos - neg)
+    return out.ravel()
+
+
+def _rayleigh_root(a0, a1, a2, v, near):
+    """The root of ``v^H P(mu) v = 0`` nearest `near`."""
+    a, b, c = np.vdot(v, a2 @ v), np.vdot(v, a1 @ v), np.vdot(v, a0 @ v)
+    disc = np.sqrt(b * b - 4.0 * a * c + 0j)
+    roots = ((-b + disc) / (2.0 * a), (-b - disc) / (2.0 * a))
+    return min(roots, key=lambda r: abs(r - near))
+
+
+def _refine(a0, a1, a2, mu, v, *, tol=1e-13, max_steps=8):
+    """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
+    the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
+    ``tol max(1, |mu|)``. Returns ``(mu, v, converged)``."""
+    for _ in range(max_steps):
+        lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
+        x = scipy.linalg.lu_solve(lu, (a1 + (2.0 * mu) * a2) @ v, check_finite=False)
+        norm = np.linalg.norm(x)
+        if not np.isfinite(norm) or norm == 0.0:
+            return mu, v, False
+        v = x / norm
+        new = _rayleigh_root(a0, a1, a2, v, mu)
+        step, mu = abs(new - mu), new
+        if step <= tol * max(1.0, abs(mu)):
+            return mu, v, True
+    return mu, v, False
+
+
+def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6):
+    """Refine ``(mu, v)`` and walk along its family to the member of least ``|centre|``.
+
+    Returns ``(mu, centre)`` or ``None`` when a refinement does not converge or lands off the
+    expected copy."""
+    mu, v, ok = _refine(a0, a1, a2, mu, v)
+    if not ok:
+        return None
+    c = float(harmonic_centre(v[:, None], ndof, harmonics)[0])
+    for _ in range(max_walk):
+        if abs(c) <= 0.25:  # a copy is one harmonic away: its |centre| is >= 0.75 > |c|
+            return mu, c
+        k = 1 if c > 0 else -1  # the copy mu + i k has centre c - k
+        nb_mu, nb_v, ok = _refine(a0, a1, a2, mu + 1j * k, _shift_harmonics(v, ndof, harmonics, k))
+        if not ok or abs(nb_mu - (mu + 1j * k)) > 0.25:
+            return None
+        nb_c = float(harmonic_centre(nb_v[:, None], ndof, harmonics)[0])
+        if centrality(nb_mu, nb_c) >= centrality(mu, c):
+            return mu, c
+        mu, v, c = nb_mu, nb_v, nb_c
+    return None
+
+
+def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
+                    seed_harmonics: int = SEED_HARMONICS):
+    """Central exponents of one point (``(N, N)`` matrices) by refinement, or ``None``.
+
+    See the module docstring. Conjugate families are refined once (real matrices: the
+    conjugate of an eigenpair is one). ``None`` when not confident: a refinement failed, two
+    seeds reached one family, or the number of distinct families is not ``2n``.
+    """
+    seed = min(seed_harmonics, harmonics)
+    win = _window(ndof, harmonics, seed)
+    sub = [x[np.ix_(win, win)][None] for x in (a0, a1, a2)]
+    with single_thread_blas():
+        mu_s, vec_s = np.linalg.eig(_companion(*sub))
+        mu_s, vec_s = mu_s[0], vec_s[0, : win.size]
+        centre_s = harmonic_centre(vec_s, ndof, seed)
+        picks, trivial, _ = select_central(mu_s, centre_s, 2 * ndof, zero_tol=zero_tol,
+                                           copy_tol=max(copy_tol, SEED_COPY_TOL))
+        tol = 1e-9 * max(1.0, float(np.max(np.abs(mu_s[picks]), initial=0.0)))
+        found: list[complex] = []
+        for i in picks:
+            if mu_s[i].imag < -tol and any(abs(np.conj(mu_s[i]) - mu_s[j]) <= tol for j in picks):
+                continue  # its conjugate is a seed too
+            v = np.zeros(a0.shape[0], dtype=complex)
+            v[win] = vec_s[:, i]
+            best = _most_central_member(a0, a1, a2, mu_s[i], v / np.linalg.norm(v), ndof, harmonics)
+            if best is None:
+                return None
+            found.append(best[0])
+            if not _is_self_conjugate(best[0]):
+                found.append(np.conj(best[0]))
+    mu = np.asarray(found)
+    mult = np.exp(2.0 * np.pi * mu)
+    if len(mu) != 2 * ndof - trivial:
+        return None
+    gap = np.abs(mult[:, None] - mult[None, :])
+    np.fill_diagonal(gap, np.inf)
+    if np.any(gap <= copy_tol * np.maximum(1.0, np.abs(mult))[:, None]):
+        return None  # two seeds in one family, or a repeated multiplier: let the dense way decide
+    return mu
+
+
+# ============================================================================ dispatch
+
+
+def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
+                      method: str = "auto"):
+    """Central exponents ``mu = lam / w`` of a stack of points, shapes ``(m, N, N)``.
+
+    `method`: ``"dense"``, ``"refined"`` (falls back to dense per point when not confident) or
+    ``"auto"`` (refined when ``N > REFINE_MIN_SIZE``). Returns a list of ``m`` arrays.
+    """
+    if method not in ("auto", "dense", "refined"):
+        raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
+    size = a0.shape[-1]
+    if method == "dense" or (method == "auto" and size <= REFINE_MIN_SIZE):
+        return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    out = []
+    for k in range(len(a0)):
+        mu = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+        if mu is None:
+            mu = dense_central(a0[k : k + 1], a1[k : k + 1], a2[k : k + 1], ndof, harmonics,
+                               zero_tol=zero_tol, copy_tol=copy_tol)[0]
+        out.append(mu)
+    return out
