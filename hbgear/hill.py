@@ -47,11 +47,11 @@ __all__ = [
 REFINE_MIN_SIZE = 48
 
 #: Half-width of the harmonic window of the sub-problem that seeds the refinement.
-SEED_HARMONICS = 8
+SEED_HARMONICS = 6
 
-#: Copy tolerance (relative, on multipliers) of the seed selection: in the small sub-problem the
-#: two members ``a +- i/2`` of a real negative multiplier's family differ by up to ~1e-4, so
-#: the default ``1e-6`` would seed that family twice and miss another one.
+#: A seed whose multiplier is within this (relative) of a family already found is not refined:
+#: in the small sub-problem copies differ by up to ~1e-4 (more at low speeds, where a seed
+#: that slips through only costs a refinement that lands on a member already found).
 SEED_COPY_TOL = 1e-3
 
 _BLAS_CONTROLLER: list = []
@@ -71,30 +71,36 @@ _BATCHED: dict = {}
 
 
 def hill_quadratic(hb, zs, ps, system, chunk: int = 32):
-    """``(A0, A1, A2)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``, shapes ``(m, N, N)``.
+    """``(A0, A1, A2, w)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``: shapes ``(m, N, N)``, ``(m,)``.
 
-    One jitted, vmapped :meth:`~hbgear.hb.HarmonicBalance.hill_matrices` call per `chunk`
-    points (the last chunk padded, so one compilation serves every curve length).
+    Small problems (``N <= REFINE_MIN_SIZE``): one jitted, vmapped
+    :meth:`~hbgear.hb.HarmonicBalance.hill_matrices` call per `chunk` points (the last chunk
+    padded, so one compilation serves every curve length), which removes the per-call
+    overhead that dominates there. Larger ones: one call per point (vmapping the sampled
+    Toeplitz blocks is slower per point on the CPU than the single calls).
     """
     import jax
     import jax.numpy as jnp
 
     zs = np.atleast_2d(np.asarray(zs, dtype=float))
     ps = np.atleast_1d(np.asarray(ps, dtype=float))
-    fn = _BATCHED.get(hb)
-    if fn is None:
-        fn = _BATCHED[hb] = jax.jit(jax.vmap(hb._hill_matrices_jit, in_axes=(0, 0, None, None)))
-    quad = hb.quadrature(system)
     m = len(ps)
-    size = min(chunk, m)
-    parts = []
-    for lo in range(0, m, size):
-        idx = np.minimum(np.arange(lo, lo + size), m - 1)
-        jz, d1, d2 = fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, quad)
-        keep = min(size, m - lo)
-        parts.append([np.asarray(x, dtype=float)[:keep] for x in (jz, d1, d2)])
-    a0, d1, d2 = (np.concatenate([p[k] for p in parts]) for k in range(3))
     w = np.array([float(hb.base_frequency(system, p)) for p in ps])
+    if hb.ndof * (2 * hb.harmonics + 1) > REFINE_MIN_SIZE:
+        parts = [hb.hill_matrices(jnp.asarray(z), float(p), system) for z, p in zip(zs, ps)]
+        a0, d1, d2 = (np.stack([np.asarray(x[k], dtype=float) for x in parts]) for k in range(3))
+    else:
+        fn = _BATCHED.get(hb)
+        if fn is None:
+            fn = _BATCHED[hb] = jax.jit(jax.vmap(hb._hill_matrices_jit, in_axes=(0, 0, None, None)))
+        quad = hb.quadrature(system)
+        size = min(chunk, m)
+        parts = []
+        for lo in range(0, m, size):
+            idx = np.minimum(np.arange(lo, lo + size), m - 1)
+            keep = min(size, m - lo)
+            parts.append([np.asarray(x, dtype=float)[:keep] for x in fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, quad)])
+        a0, d1, d2 = (np.concatenate([x[k] for x in parts]) for k in range(3))
     return a0, w[:, None, None] * d1, (w * w)[:, None, None] * d2, w
 
 
@@ -266,13 +272,14 @@ def _rayleigh_root(a0, a1, a2, v, near):
     return min(roots, key=lambda r: abs(r - near))
 
 
-def _refine(a0, a1, a2, mu, v, *, tol=1e-13, max_steps=8):
+def _refine(a0, a1, a2, mu, v, *, tol=1e-10, max_steps=8):
     """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
     the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
-    ``tol max(1, |mu|)``. Returns ``(mu, v, converged)``."""
+    ``tol max(1, |mu|)`` (convergence is quadratic: the last ``mu`` is then exact to rounding).
+    Returns ``(mu, v, converged)``."""
     for _ in range(max_steps):
         lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
-        x = scipy.linalg.lu_solve(lu, (a1 + (2.0 * mu) * a2) @ v, check_finite=False)
+        x = scipy.linalg.lu_solve(lu, a1 @ v + (2.0 * mu) * (a2 @ v), check_finite=False)
         norm = np.linalg.norm(x)
         if not np.isfinite(norm) or norm == 0.0:
             return mu, v, False
@@ -311,9 +318,13 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
                     seed_harmonics: int = SEED_HARMONICS):
     """Central exponents of one point (``(N, N)`` matrices) by refinement, or ``None``.
 
-    See the module docstring. Conjugate families are refined once (real matrices: the
-    conjugate of an eigenpair is one). ``None`` when not confident: a refinement failed, two
-    seeds reached one family, or the number of distinct families is not ``2n``.
+    See the module docstring. Seeds are taken by increasing centrality from the sub-problem's
+    eigenpairs until ``2n`` families (less the trivial ones) are found; a seed whose
+    multiplier is within ``SEED_COPY_TOL`` of a family already found is skipped, one that walks
+    to a member already found counts once, and the conjugate of every complex family is added
+    without a refinement (real matrices). ``None`` when not confident: a refinement failed or
+    did not land on the expected copy, too many seeds were needed, or two families share a
+    multiplier (to `copy_tol`).
     """
     seed = min(seed_harmonics, harmonics)
     win = _window(ndof, harmonics, seed)
@@ -321,30 +332,36 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
     with single_thread_blas():
         mu_s, vec_s = np.linalg.eig(_companion(*sub))
         mu_s, vec_s = mu_s[0], vec_s[0, : win.size]
-        centre_s = harmonic_centre(vec_s, ndof, seed)
-        picks, trivial, _ = select_central(mu_s, centre_s, 2 * ndof, zero_tol=zero_tol,
-                                           copy_tol=max(copy_tol, SEED_COPY_TOL))
-        tol = 1e-9 * max(1.0, float(np.max(np.abs(mu_s[picks]), initial=0.0)))
+        near_zero = set(_trivial(mu_s, zero_tol)) if zero_tol is not None else set()
+        want = 2 * ndof - len(near_zero)
         found: list[complex] = []
-        for i in picks:
-            if mu_s[i].imag < -tol and any(abs(np.conj(mu_s[i]) - mu_s[j]) <= tol for j in picks):
-                continue  # its conjugate is a seed too
+        tries = 0
+        for i in np.argsort(centrality(mu_s, harmonic_centre(vec_s, ndof, seed)), kind="stable"):
+            if len(found) >= want or tries > 2 * want + 2:
+                break
+            m = np.exp(2.0 * np.pi * mu_s[i])
+            if i in near_zero or any(abs(m - np.exp(2.0 * np.pi * f)) <= SEED_COPY_TOL * max(1.0, abs(m))
+                                     for f in found):
+                continue
+            tries += 1
             v = np.zeros(a0.shape[0], dtype=complex)
             v[win] = vec_s[:, i]
             best = _most_central_member(a0, a1, a2, mu_s[i], v / np.linalg.norm(v), ndof, harmonics)
             if best is None:
                 return None
+            if any(abs(best[0] - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+                continue  # a copy of a family already found (the sub-problem did not merge them)
             found.append(best[0])
             if not _is_self_conjugate(best[0]):
                 found.append(np.conj(best[0]))
     mu = np.asarray(found)
-    mult = np.exp(2.0 * np.pi * mu)
-    if len(mu) != 2 * ndof - trivial:
+    if len(mu) != want:
         return None
+    mult = np.exp(2.0 * np.pi * mu)
     gap = np.abs(mult[:, None] - mult[None, :])
     np.fill_diagonal(gap, np.inf)
     if np.any(gap <= copy_tol * np.maximum(1.0, np.abs(mult))[:, None]):
-        return None  # two seeds in one family, or a repeated multiplier: let the dense way decide
+        return None  # a repeated multiplier: let the dense way decide
     return mu
 
 
