@@ -29,6 +29,9 @@ With a free mean coordinate (reaction boundary) the exponent 0 is a Jordan block
 
 from __future__ import annotations
 
+import cmath
+import math
+
 import numpy as np
 import scipy.linalg
 from threadpoolctl import ThreadpoolController
@@ -42,8 +45,9 @@ __all__ = [
     "central_exponents",
 ]
 
-#: Use the refined way above this many unknowns ``N = n (2H+1)`` (companion ``2N``): below it
-#: the full eigen-decomposition of a stack of small companions is cheaper than the iterations.
+#: Above this many unknowns ``N = n (2H+1)`` the Hill matrices are computed one point at a time
+#: and a point the batched refinement leaves unsettled gets a second, single-point refinement
+#: before the dense way (below it the stacked dense eigen-decomposition is the cheaper rescue).
 REFINE_MIN_SIZE = 48
 
 #: Half-width of the harmonic window of the sub-problem that seeds the refinement.
@@ -354,15 +358,151 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
             found.append(best[0])
             if not _is_self_conjugate(best[0]):
                 found.append(np.conj(best[0]))
-    mu = np.asarray(found)
-    if len(mu) != want:
+    return _distinct_families(found, want, copy_tol)
+
+
+# ============================================================================ refined, batched
+
+
+def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=1e-10, max_steps=8):
+    """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
+    stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``."""
+    mu, v = mu.copy(), v.copy()
+    b0, b1, b2 = a0[owner], a1[owner], a2[owner]
+    converged = np.zeros(len(mu), dtype=bool)
+    active = np.arange(len(mu))
+    for _ in range(max_steps):
+        if active.size == 0:
+            break
+        c0, c1, c2, m, x = b0[active], b1[active], b2[active], mu[active], v[active, :, None]
+        pencil = c0 + m[:, None, None] * c1 + (m * m)[:, None, None] * c2
+        try:
+            y = np.linalg.solve(pencil, c1 @ x + (2.0 * m)[:, None, None] * (c2 @ x))
+        except np.linalg.LinAlgError:  # an exactly singular pencil: leave these to the single-point way
+            break
+        norm = np.linalg.norm(y[..., 0], axis=1)
+        bad = ~np.isfinite(norm) | (norm == 0.0)
+        y = y / np.where(bad, 1.0, norm)[:, None, None]
+        yh = y.conj()[..., 0]
+        qa = np.sum(yh * (c2 @ y)[..., 0], axis=1)
+        qb = np.sum(yh * (c1 @ y)[..., 0], axis=1)
+        qc = np.sum(yh * (c0 @ y)[..., 0], axis=1)
+        disc = np.sqrt(qb * qb - 4.0 * qa * qc + 0j)
+        r1, r2 = (-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa)
+        new = np.where(np.abs(r1 - m) <= np.abs(r2 - m), r1, r2)
+        done = np.abs(new - m) <= tol * np.maximum(1.0, np.abs(new))
+        mu[active], v[active] = new, y[..., 0]
+        converged[active[done & ~bad]] = True
+        active = active[~done & ~bad]
+    return mu, v, converged
+
+
+def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_walk=4):
+    """:func:`_most_central_member`'s walk for refined seeds, batched: every seed with
+    ``|centre| > 1/4`` has its neighbour copy towards the centre refined (one stacked solve per
+    step); a seed moves there while the centrality falls. A seed is left unconverged when a
+    neighbour does not converge onto the expected copy or the walk does not settle."""
+    centre = harmonic_centre(v.T, ndof, harmonics) if len(mu) else np.zeros(0)
+    open_ = np.flatnonzero(converged & (np.abs(centre) > 0.25))
+    for _ in range(max_walk):
+        if open_.size == 0:
+            return mu, v, centre, converged
+        k = np.where(centre[open_] > 0, 1, -1)
+        start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(open_, k)])
+        target = mu[open_] + 1j * k
+        nb_mu, nb_v, nb_ok = _batched_refine(a0, a1, a2, owner[open_], target, start)
+        nb_ok &= np.abs(nb_mu - target) <= 0.25
+        nb_c = harmonic_centre(nb_v.T, ndof, harmonics)
+        converged[open_[~nb_ok]] = False
+        better = nb_ok & (centrality(nb_mu, nb_c) < centrality(mu[open_], centre[open_]))
+        moved = open_[better]
+        mu[moved], v[moved], centre[moved] = nb_mu[better], nb_v[better], nb_c[better]
+        open_ = moved[np.abs(centre[moved]) > 0.25]
+    converged[open_] = False
+    return mu, v, centre, converged
+
+
+def _batch_seed_harmonics(harmonics: int) -> int:
+    """Seed window of the batched refinement: half the harmonics, at most SEED_HARMONICS."""
+    return max(1, min(SEED_HARMONICS, harmonics // 2))
+
+
+def _seed_picks(mu, mult, key, need: int, near_zero) -> list[int]:
+    """The seed selection of one point in plain Python (lists): by increasing `key`, skipping
+    the trivial ones and copies of a pick's multiplier to ``SEED_COPY_TOL``, then dropping a
+    pick whose conjugate is a pick too (the conjugate family comes without a refinement)."""
+    picks: list[int] = []
+    for i in sorted(range(len(key)), key=key.__getitem__):
+        if len(picks) == need:
+            break
+        if i in near_zero or any(abs(mult[i] - mult[j]) <= SEED_COPY_TOL * max(1.0, abs(mult[j])) for j in picks):
+            continue
+        picks.append(i)
+    tol = 1e-9 * max([1.0] + [abs(mu[i]) for i in picks])
+    return [i for i in picks
+            if not (mu[i].imag < -tol and any(abs(mu[i].conjugate() - mu[j]) <= tol for j in picks))]
+
+
+def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+    """:func:`refined_central` for a stack of points: a list with ``None`` where a point is not
+    settled this way (a refinement or a walk step did not converge onto the expected copy, or
+    not ``2n`` distinct families were found).
+
+    The seed sub-problems (:func:`_batch_seed_harmonics`) are one stacked eigen-decomposition,
+    every refinement step and every walk step one stacked solve over all points: this removes
+    the per-point call overhead that dominates small problems (Duffing, H = 7).
+    """
+    m, size = a0.shape[0], a0.shape[-1]
+    seed = _batch_seed_harmonics(harmonics)
+    win = _window(ndof, harmonics, seed)
+    with single_thread_blas():
+        mu_s, vec_s = np.linalg.eig(_companion(*(x[:, win][:, :, win] for x in (a0, a1, a2))))
+        vec_s = vec_s[:, : win.size]
+        key = centrality(mu_s, harmonic_centre(vec_s, ndof, seed)).tolist()
+        mult_s = np.exp(2.0 * np.pi * mu_s).tolist()
+        mu_list = mu_s.tolist()
+        owner, picks_of, want = [], [], []
+        for k in range(m):
+            near_zero = _trivial(mu_s[k], zero_tol) if zero_tol is not None else []
+            picks = _seed_picks(mu_list[k], mult_s[k], key[k], 2 * ndof - len(near_zero), set(near_zero))
+            want.append(2 * ndof - len(near_zero))
+            owner.extend([k] * len(picks))
+            picks_of.extend(picks)
+        owner = np.asarray(owner, dtype=int)
+        v0 = np.zeros((len(owner), size), dtype=complex)
+        if len(owner):
+            v0[:, win] = vec_s[owner, :, np.asarray(picks_of, dtype=int)]
+            v0 /= np.linalg.norm(v0, axis=1, keepdims=True)
+        mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0)
+        mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics)
+    out: list = [None] * m
+    settled = np.ones(m, dtype=bool)
+    np.logical_and.at(settled, owner, converged)
+    mu_list, owner_list = mu.tolist(), owner.tolist()
+    found_of: list[list[complex]] = [[] for _ in range(m)]
+    for k, x in zip(owner_list, mu_list):
+        found = found_of[k]
+        if any(abs(x - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+            continue  # two seeds walked to one member
+        found.append(x)
+        if not _is_self_conjugate(x):
+            found.append(x.conjugate())
+    for k in range(m):
+        if settled[k]:
+            out[k] = _distinct_families(found_of[k], want[k], copy_tol)
+    return out
+
+
+def _distinct_families(found, want: int, copy_tol: float):
+    """``found`` as an array if it holds `want` exponents with distinct multipliers, else ``None``."""
+    if len(found) != want:
         return None
-    mult = np.exp(2.0 * np.pi * mu)
-    gap = np.abs(mult[:, None] - mult[None, :])
-    np.fill_diagonal(gap, np.inf)
-    if np.any(gap <= copy_tol * np.maximum(1.0, np.abs(mult))[:, None]):
-        return None  # a repeated multiplier: let the dense way decide
-    return mu
+    mult = [cmath.exp(2.0 * math.pi * x) for x in found]
+    for i in range(len(mult)):
+        for j in range(i):
+            if abs(mult[i] - mult[j]) <= copy_tol * max(1.0, abs(mult[i])):
+                return None  # a repeated multiplier: let the dense way decide
+    return np.asarray(found, dtype=complex)
 
 
 # ============================================================================ dispatch
@@ -372,19 +512,24 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
                       method: str = "auto"):
     """Central exponents ``mu = lam / w`` of a stack of points, shapes ``(m, N, N)``.
 
-    `method`: ``"dense"``, ``"refined"`` (falls back to dense per point when not confident) or
-    ``"auto"`` (refined when ``N > REFINE_MIN_SIZE``). Returns a list of ``m`` arrays.
+    `method`: ``"dense"`` (:func:`dense_central`) or ``"refined"`` (= ``"auto"``):
+    :func:`refined_central_batch` for all points, then (``N > REFINE_MIN_SIZE``)
+    :func:`refined_central` with its larger seed window where that was not settled, then
+    :func:`dense_central` (stacked) for the rest; the same exponents as the dense way.
+    Returns a list of ``m`` arrays.
     """
     if method not in ("auto", "dense", "refined"):
         raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
-    size = a0.shape[-1]
-    if method == "dense" or (method == "auto" and size <= REFINE_MIN_SIZE):
+    if method == "dense":
         return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
-    out = []
-    for k in range(len(a0)):
-        mu = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
-        if mu is None:
-            mu = dense_central(a0[k : k + 1], a1[k : k + 1], a2[k : k + 1], ndof, harmonics,
-                               zero_tol=zero_tol, copy_tol=copy_tol)[0]
-        out.append(mu)
+    out = refined_central_batch(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    if a0.shape[-1] > REFINE_MIN_SIZE:  # worth a second, better-seeded try before the dense way
+        for k in range(len(out)):
+            if out[k] is None:
+                out[k] = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    rest = [k for k in range(len(out)) if out[k] is None]
+    if rest:
+        for k, mu in zip(rest, dense_central(a0[rest], a1[rest], a2[rest], ndof, harmonics,
+                                             zero_tol=zero_tol, copy_tol=copy_tol)):
+            out[k] = mu
     return out
