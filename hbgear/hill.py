@@ -12,16 +12,24 @@ the same result:
 
 - **dense** (:func:`dense_central`): all eigenpairs of the companion linearisation, batched over
   points (one stacked :func:`numpy.linalg.eig`), then :func:`select_central`: the candidates
-  sorted by ``|centre|`` (:func:`harmonic_centre`), a copy of a multiplier already taken
+  sorted by ``|centre|`` (:func:`harmonic_centre`), a copy of an exponent already taken
   skipped, until ``2n`` are found.
-- **refined** (:func:`refined_central`, for large ``N``): the same selection on the Galerkin
-  sub-problem of the harmonics ``|k| <= Hs`` (the rows and columns of those harmonics; small
-  and cheap), each pick refined on the full problem by inverse iteration with the Rayleigh
-  functional (quadratic convergence, one LU per step), then walked along its family
-  (``mu -> mu +- i``, eigenvector shifted by one harmonic) while ``|centre|`` decreases: the
-  centre falls by one per copy, so a local minimum along the family is the family's most
-  central member, the one the dense selection keeps. It returns ``None`` (the caller then uses
-  the dense way) unless every refinement converged and ``2n`` distinct families were found.
+- **refined** (:func:`refined_central_batch`, :func:`refined_central`): the same selection on
+  the Galerkin sub-problem of the low harmonics ``|k| <= Hs`` (its rows and columns; small and
+  cheap) gives one seed per family; each is refined on the full problem by inverse iteration
+  with the Rayleigh functional (quadratic convergence, one solve per step), then walked along
+  its family (``mu -> mu +- i``, eigenvector shifted by one harmonic) while ``|centre|``
+  decreases: the centre falls by one per copy, so a local minimum along the family is the
+  family's most central member, the one the dense selection keeps. A point is settled this way
+  only if every refinement converged onto the expected copy and ``2n`` families with distinct
+  multipliers were found; otherwise the dense way decides (:func:`central_exponents`).
+
+Copies are recognised by their multiplier (to ``copy_tol``) and, for a real multiplier, as
+conjugates: the two members ``a +- i/2`` of a real negative multiplier's family (or ``a +- i k``
+of a real positive one) are exact conjugates, and the truncation can move their multipliers
+apart by more than ``copy_tol`` (1e-6 to 1e-5 at H = 4..8 in a parametric tongue, ~1e-6 at
+H = 32 near the tongue of the NLTV pair), which used to let one family be taken twice and
+another be missed.
 
 With a free mean coordinate (reaction boundary) the exponent 0 is a Jordan block (``u = const``,
 ``u = t``); the (at most two) exponents within ``zero_tol`` of 0 are dropped.

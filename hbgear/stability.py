@@ -16,11 +16,14 @@ has modulus below one (trivial rigid-body multipliers excepted). Three ways to g
 - **Variational equations** (:func:`monodromy_variational`): ``solve_ivp`` over one base
   period, segment by segment between the breakpoints, with ``Q_q``, ``Q_qd`` from ``jax.jacfwd``
   of :meth:`~hbgear.model.GearPairModel.generalized_force` along the periodic solution.
-- **Hill's method** (:func:`hill_multipliers`) on the harmonic-balance Jacobian: the quadratic
-  eigenproblem ``(J + lam D1 + lam^2 D2) v = 0`` is linearised (companion form); of its
-  ``2 n (2H+1)`` eigenvalues, the ``2n`` whose eigenvectors are most concentrated on the
-  central harmonics are kept (Lazarus & Thomas 2010), with copies (``lam + i k w``, same
-  multiplier) skipped; multipliers ``exp(lam T)``, ``T = 2 pi / w``.
+- **Hill's method** (:func:`hill_multipliers`, :func:`hill_multipliers_batch`) on the
+  harmonic-balance Jacobian: of the quadratic eigenproblem ``(J + lam D1 + lam^2 D2) v = 0``,
+  whose ``2 n (2H+1)`` eigenvalues come in families of copies ``lam + i k w`` (one multiplier
+  each), the ``2n`` members whose eigenvectors are most concentrated on the central harmonics
+  are kept (Lazarus & Thomas 2010); multipliers ``exp(lam T)``, ``T = 2 pi / w``. By default
+  only those central eigenpairs are computed (refined from a low-harmonic sub-problem, batched
+  over points, see :mod:`hbgear.hill`); ``method="dense"`` takes all eigenpairs of the companion
+  linearisation instead, with the same result.
 
 Trivial multipliers: with the ``"reaction"`` boundary the coordinate ``u`` has no restoring
 force, so the linearisation has the exponent 0 twice (a Jordan block: ``u = const``,
@@ -473,9 +476,10 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
                          method: str = "auto"):
     """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
 
-    The Hill matrices of all points come from one jitted, vmapped call per chunk of points and,
-    for small problems, all companion eigenproblems from one stacked ``numpy.linalg.eig``: on
-    the Duffing benchmark (H = 7) this is ~10x cheaper per point than one call per point.
+    Small problems get their Hill matrices from one jitted, vmapped call per chunk of points;
+    the refinement runs stacked over all points (:func:`hbgear.hill.refined_central_batch`).
+    On the Duffing benchmark (H = 7) this is several times cheaper per point than one call per
+    point.
     """
     from .hill import central_exponents, hill_quadratic
 
@@ -502,9 +506,9 @@ def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: flo
     Of every family of copies ``lam + i k w`` of the quadratic eigenproblem
     ``(J + mu w D1 + mu^2 w^2 D2) v = 0`` (``lam = mu w``) the member whose eigenvector is most
     concentrated on the central harmonics is kept (:mod:`hbgear.hill`). `method`: ``"dense"``
-    (all eigenpairs of the companion linearisation), ``"refined"`` (the central eigenpairs
-    only, by inverse iteration seeded from the low harmonics; the dense way where that is not
-    confident) or ``"auto"`` (refined for large problems): the same exponents either way.
+    (all eigenpairs of the companion linearisation) or ``"refined"`` = ``"auto"`` (the central
+    eigenpairs only, by inverse iteration seeded from the low harmonics; the dense way where
+    that is not confident): the same exponents either way (to ~1e-13 in the tests).
     With the reaction boundary the (at most two) exponents within ``TRIVIAL_TOL`` of 0 are
     dropped.
     """
