@@ -66,6 +66,10 @@ SEED_HARMONICS = 6
 #: that slips through only costs a refinement that lands on a member already found).
 SEED_COPY_TOL = 1e-3
 
+#: The refinement stops after a step below this (relative to ``max(1, |mu|)``): convergence is
+#: quadratic, so the exponent is then exact to ~``STEP_TOL^2`` (rounding, in the tests 1e-13).
+STEP_TOL = 1e-7
+
 _BLAS_CONTROLLER: list = []
 
 
@@ -284,11 +288,10 @@ def _rayleigh_root(a0, a1, a2, v, near):
     return min(roots, key=lambda r: abs(r - near))
 
 
-def _refine(a0, a1, a2, mu, v, *, tol=1e-10, max_steps=8):
+def _refine(a0, a1, a2, mu, v, *, tol=STEP_TOL, max_steps=8):
     """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
     the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
-    ``tol max(1, |mu|)`` (convergence is quadratic: the last ``mu`` is then exact to rounding).
-    Returns ``(mu, v, converged)``."""
+    ``tol max(1, |mu|)`` (see :data:`STEP_TOL`). Returns ``(mu, v, converged)``."""
     for _ in range(max_steps):
         lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
         x = scipy.linalg.lu_solve(lu, a1 @ v + (2.0 * mu) * (a2 @ v), check_finite=False)
@@ -301,6 +304,12 @@ def _refine(a0, a1, a2, mu, v, *, tol=1e-10, max_steps=8):
         if step <= tol * max(1.0, abs(mu)):
             return mu, v, True
     return mu, v, False
+
+
+def _is_conjugate_copy(mu, k) -> bool:
+    """The copy ``mu + i k`` is ``conj(mu)`` (``Im mu = -k/2``, a real multiplier's family): the
+    conjugate eigenpair, known without a refinement, with the opposite centre."""
+    return abs(2.0 * mu.imag + k) <= SELF_CONJUGATE_TOL
 
 
 def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6):
@@ -316,10 +325,13 @@ def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6):
         if abs(c) <= 0.25:  # a copy is one harmonic away: its |centre| is >= 0.75 > |c|
             return mu, c
         k = 1 if c > 0 else -1  # the copy mu + i k has centre c - k
-        nb_mu, nb_v, ok = _refine(a0, a1, a2, mu + 1j * k, _shift_harmonics(v, ndof, harmonics, k))
-        if not ok or abs(nb_mu - (mu + 1j * k)) > 0.25:
-            return None
-        nb_c = float(harmonic_centre(nb_v[:, None], ndof, harmonics)[0])
+        if _is_conjugate_copy(mu, k):
+            nb_mu, nb_v, nb_c = np.conj(mu), np.conj(v), -c
+        else:
+            nb_mu, nb_v, ok = _refine(a0, a1, a2, mu + 1j * k, _shift_harmonics(v, ndof, harmonics, k))
+            if not ok or abs(nb_mu - (mu + 1j * k)) > 0.25:
+                return None
+            nb_c = float(harmonic_centre(nb_v[:, None], ndof, harmonics)[0])
         if centrality(nb_mu, nb_c) >= centrality(mu, c):
             return mu, c
         mu, v, c = nb_mu, nb_v, nb_c
@@ -372,7 +384,7 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
 # ============================================================================ refined, batched
 
 
-def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=1e-10, max_steps=8):
+def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
     """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
     stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``."""
     mu, v = mu.copy(), v.copy()
@@ -416,11 +428,18 @@ def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_w
         if open_.size == 0:
             return mu, v, centre, converged
         k = np.where(centre[open_] > 0, 1, -1)
-        start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(open_, k)])
-        target = mu[open_] + 1j * k
-        nb_mu, nb_v, nb_ok = _batched_refine(a0, a1, a2, owner[open_], target, start)
-        nb_ok &= np.abs(nb_mu - target) <= 0.25
-        nb_c = harmonic_centre(nb_v.T, ndof, harmonics)
+        conj = np.abs(2.0 * mu[open_].imag + k) <= SELF_CONJUGATE_TOL  # see _is_conjugate_copy
+        nb_mu, nb_v = np.conj(mu[open_]), np.conj(v[open_])
+        nb_c, nb_ok = -centre[open_], np.ones(open_.size, dtype=bool)
+        other = np.flatnonzero(~conj)
+        if other.size:
+            s_other = open_[other]
+            start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(s_other, k[other])])
+            target = mu[s_other] + 1j * k[other]
+            r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, owner[s_other], target, start)
+            nb_mu[other], nb_v[other] = r_mu, r_v
+            nb_ok[other] = r_ok & (np.abs(r_mu - target) <= 0.25)
+            nb_c[other] = harmonic_centre(r_v.T, ndof, harmonics)
         converged[open_[~nb_ok]] = False
         better = nb_ok & (centrality(nb_mu, nb_c) < centrality(mu[open_], centre[open_]))
         moved = open_[better]

@@ -489,6 +489,13 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
     a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
     mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
                             copy_tol=copy_tol, method=method)
+    if len({len(mu) for mu in mus}) == 1:  # one stacked sort (the usual case: no point lost a trivial)
+        mu = np.stack(mus)
+        mult = np.exp(2.0 * np.pi * mu)
+        order = np.argsort(-np.abs(mult), axis=1, kind="stable")
+        lam = np.take_along_axis(mu, order, axis=1) * w[:, None]
+        mult = np.take_along_axis(mult, order, axis=1)
+        return list(zip(lam, mult))
     out = []
     for mu, wk in zip(mus, w):
         mult = np.exp(2.0 * np.pi * mu)
@@ -636,6 +643,7 @@ def _row_for_model(model, omegas: np.ndarray, settings: _HBSettings):
 
     out = np.full(omegas.size, np.nan)
     z = None
+    solved, zs = [], []
     for k, omega in enumerate(omegas):
         try:
             sol = solve_periodic(
@@ -645,10 +653,14 @@ def _row_for_model(model, omegas: np.ndarray, settings: _HBSettings):
             z = None
             continue
         z = sol.z
+        solved.append(k)
+        zs.append(np.asarray(sol.z))
         hb = HarmonicBalance(model.ndof, sol.harmonics, sol.nu, sol.samples)
-        mult = hill_multipliers(hb, sol.z, float(omega), GearSystem(model))
+    if solved:
+        # one batched Hill call for the row (all points share hb: same H, nu, N)
+        mults = hill_multipliers_batch(hb, np.stack(zs), omegas[solved], GearSystem(model))
         # per mesh period, comparable with the linear maps
-        out[k] = max_abs_multiplier(mult) ** (1.0 / sol.nu)
+        out[solved] = [max_abs_multiplier(m) ** (1.0 / hb.nu) for m in mults]
     return out
 
 
