@@ -182,3 +182,18 @@ def test_real_negative_multiplier_copies_are_one_family():
         for method in ("dense", "refined"):
             hill_mult = st.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m), method=method)
             assert max_pair_distance(hill_mult, exact, relative=False) < 1e-4, (harmonics, method, hill_mult, exact)
+
+
+def test_nltv_real_negative_multipliers_at_h32_match_the_variational_monodromy():
+    """At 9000 rpm (soft spring, NLTV arctan, H = 32) the copies a +- i/2 of the larger real
+    negative multiplier differ by ~3e-6 (> copy_tol): the selection must still take the smaller
+    real negative multiplier rather than that copy."""
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    w = rpm_to_rad_s(9000.0)
+    sol = solve_periodic(model, w, harmonics=32, samples=256)
+    hb = HarmonicBalance(model.ndof, 32, 1, 256)
+    exact = np.linalg.eigvals(st.monodromy_variational(model, sol, w))
+    assert np.sum((np.abs(exact.imag) < 1e-9) & (exact.real < 0)) == 2
+    for method in ("dense", "refined"):
+        mult = st.hill_multipliers(hb, sol.z, w, GearSystem(model), method=method)
+        assert max_pair_distance(mult, exact, relative=False) < 1e-2, (method, mult, exact)
