@@ -72,6 +72,15 @@ SEED_COPY_TOL = 1e-3
 #: between the multipliers of the refined and the dense ways).
 STEP_TOL = 1e-7
 
+#: Real offset of the two restarts of a seed whose refinement does not converge (it sits
+#: between two exponents ``a1 + i b``, ``a2 + i b``, e.g. a split real negative pair that the
+#: sub-problem still sees as one complex pair: ``|a1 - a2|`` ~ 0.07 at 3800 rpm on the NLTV pair).
+SPLIT_OFFSET = 0.05
+
+#: Points per stacked refinement: about this many bytes per stack of complex pencils (7 points at
+#: N = 130, all of a Duffing curve at N = 15); larger stacks only add memory traffic.
+BATCH_BYTES = 2e6
+
 _BLAS_CONTROLLER: list = []
 
 
@@ -290,17 +299,21 @@ def _rayleigh_root(a0, a1, a2, v, near):
     return min(roots, key=lambda r: abs(r - near))
 
 
-def _refine(a0, a1, a2, mu, v, *, tol=STEP_TOL, max_steps=8):
+def _refine(a0, a1, a2, mu, v, *, tol=STEP_TOL, max_steps=8, fixed_steps=0):
     """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
     the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
-    ``tol max(1, |mu|)`` (see :data:`STEP_TOL`). Returns ``(mu, v, converged)``."""
-    for _ in range(max_steps):
+    ``tol max(1, |mu|)`` (see :data:`STEP_TOL`); the first `fixed_steps` steps keep the shift
+    (plain inverse iteration: picks the exponent nearest `mu` out of a close pair).
+    Returns ``(mu, v, converged)``."""
+    for step in range(max_steps):
         lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
         x = scipy.linalg.lu_solve(lu, a1 @ v + (2.0 * mu) * (a2 @ v), check_finite=False)
         norm = np.linalg.norm(x)
         if not np.isfinite(norm) or norm == 0.0:
             return mu, v, False
         v = x / norm
+        if step < fixed_steps:
+            continue
         new = _rayleigh_root(a0, a1, a2, v, mu)
         step, mu = abs(new - mu), new
         if step <= tol * max(1.0, abs(mu)):
@@ -314,12 +327,12 @@ def _is_conjugate_copy(mu, k) -> bool:
     return abs(2.0 * mu.imag + k) <= SELF_CONJUGATE_TOL
 
 
-def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6):
+def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6, fixed_steps=0):
     """Refine ``(mu, v)`` and walk along its family to the member of least ``|centre|``.
 
     Returns ``(mu, centre)`` or ``None`` when a refinement does not converge or lands off the
     expected copy."""
-    mu, v, ok = _refine(a0, a1, a2, mu, v)
+    mu, v, ok = _refine(a0, a1, a2, mu, v, fixed_steps=fixed_steps)
     if not ok:
         return None
     c = float(harmonic_centre(v[:, None], ndof, harmonics)[0])
@@ -372,14 +385,21 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
             tries += 1
             v = np.zeros(a0.shape[0], dtype=complex)
             v[win] = vec_s[:, i]
-            best = _most_central_member(a0, a1, a2, mu_s[i], v / np.linalg.norm(v), ndof, harmonics)
-            if best is None:
+            v /= np.linalg.norm(v)
+            best = [_most_central_member(a0, a1, a2, mu_s[i], v, ndof, harmonics)]
+            if best[0] is None:
+                # the seed may sit between two close exponents (a complex pair of the sub-problem
+                # that is a split real pair in the full problem): one start on either side
+                best = [_most_central_member(a0, a1, a2, mu_s[i] + d, v, ndof, harmonics, fixed_steps=2)
+                        for d in (-SPLIT_OFFSET, SPLIT_OFFSET)]
+            if any(b is None for b in best):
                 return None
-            if any(abs(best[0] - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
-                continue  # a copy of a family already found (the sub-problem did not merge them)
-            found.append(best[0])
-            if not _is_self_conjugate(best[0]):
-                found.append(np.conj(best[0]))
+            for mu_b, _ in best:
+                if any(abs(mu_b - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+                    continue  # a copy of a family already found (the sub-problem did not merge them)
+                found.append(mu_b)
+                if not _is_self_conjugate(mu_b):
+                    found.append(np.conj(mu_b))
     return _distinct_families(found, want, copy_tol)
 
 
@@ -390,14 +410,16 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
     """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
     stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``."""
     mu, v = mu.copy(), v.copy()
-    b0, b1, b2 = a0[owner], a1[owner], a2[owner]
     converged = np.zeros(len(mu), dtype=bool)
     active = np.arange(len(mu))
     for _ in range(max_steps):
         if active.size == 0:
             break
-        c0, c1, c2, m, x = b0[active], b1[active], b2[active], mu[active], v[active, :, None]
-        pencil = c0 + m[:, None, None] * c1 + (m * m)[:, None, None] * c2
+        o, m, x = owner[active], mu[active], v[active, :, None]
+        c0, c1, c2 = a0[o], a1[o], a2[o]
+        pencil = c1 * m[:, None, None]
+        pencil += c0
+        pencil += c2 * (m * m)[:, None, None]
         try:
             y = np.linalg.solve(pencil, c1 @ x + (2.0 * m)[:, None, None] * (c2 @ x))
         except np.linalg.LinAlgError:  # an exactly singular pencil: leave these to the single-point way
@@ -551,7 +573,12 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
         raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
     if method == "dense":
         return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
-    out = refined_central_batch(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    group = max(1, int(BATCH_BYTES // (16 * a0.shape[-1] ** 2)))  # keep the stacked pencils in cache
+    out = []
+    for lo in range(0, len(a0), group):
+        part = slice(lo, lo + group)
+        out += refined_central_batch(a0[part], a1[part], a2[part], ndof, harmonics, zero_tol=zero_tol,
+                                     copy_tol=copy_tol)
     if a0.shape[-1] > REFINE_MIN_SIZE:  # worth a second, better-seeded try before the dense way
         for k in range(len(out)):
             if out[k] is None:

@@ -58,6 +58,21 @@ CASES = [
 ]
 
 
+def test_seed_between_a_split_pair_restarts_on_either_side():
+    """3800 rpm: the low-harmonic sub-problem still sees the mesh mode as a complex pair, the
+    full problem has two real negative multipliers (exponents a1 + i/2, a2 + i/2, a1 - a2 ~ 0.07):
+    the seed's refinement oscillates between them, the batched way leaves the point, and the
+    single-point way restarts on either side of the seed."""
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    a0, a1, a2, _ = quadratic_at(model, 3800.0)
+    dense = hill.dense_central(a0, a1, a2, model.ndof, 32)[0]
+    assert np.sum(np.abs(dense.imag - 0.5) < 1e-5) == 2  # two real negative multipliers
+    assert hill.refined_central_batch(a0, a1, a2, model.ndof, 32)[0] is None
+    refined = hill.refined_central(a0[0], a1[0], a2[0], model.ndof, 32)
+    assert refined is not None
+    assert max_pair_distance(np.exp(2 * np.pi * refined), np.exp(2 * np.pi * dense)) < 1e-8
+
+
 @pytest.mark.parametrize("overrides, rpm", CASES)
 def test_refined_central_exponents_equal_dense_selection(overrides, rpm):
     model = gear(*overrides)
