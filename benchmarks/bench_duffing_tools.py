@@ -4,8 +4,10 @@ Problem: ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos(w t)``, ``w`` in ``[0.5, 2]`` 
 ``H = 7`` harmonics, ``N = 64`` time samples per period (AFT) for every tool.
 
 - **hbgear**: :func:`hbgear.continuation.continuation` on :class:`hbgear.system.Duffing`,
-  Newton tolerance ``1e-9`` on ``max |R|``, then Hill's method on every point
-  (:func:`hbgear.stability.hill_multipliers`), timed separately.
+  Newton tolerance ``1e-9`` on ``max |R|``, then Hill's method on every point, timed
+  separately: batched over the curve (:func:`hbgear.stability.hill_multipliers_batch`, as
+  ``hbgear frc`` does) and, for the ratio, one :func:`hbgear.stability.hill_multipliers` call
+  per point.
 - **pyHarm** (PyPI ``pyharm-os``): installed into its own virtual environment
   ``benchmarks/.venv-others`` (created on first use with ``python3 -m venv`` and ``pip``),
   run in a subprocess of that interpreter (this file, ``--pyharm-worker``): its ``frf`` analysis
@@ -39,6 +41,20 @@ H, SAMPLES, W0, W1 = 7, 64, 0.5, 2.0
 DAMPING, STIFFNESS, CUBIC, FORCING = 0.02, 1.0, 0.1, 0.05
 TOLERANCE = 1e-9
 CHECK_W = (0.6, 0.8, 0.95, 1.3, 1.6, 1.9)  # single-valued response (the bistable band is ~1.05-1.16)
+
+
+def max_pair_distance(a, b, relative=False):
+    """Largest distance between two sets of multipliers paired one to one (the closest pairing)."""
+    from scipy.optimize import linear_sum_assignment
+
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape:
+        return float("inf")
+    d = np.abs(a[:, None] - b[None, :])
+    if relative:
+        d = d / np.maximum(np.abs(b)[None, :], 1e-300)
+    rows, cols = linear_sum_assignment(d)
+    return float(d[rows, cols].max(initial=0.0))
 
 
 # ----------------------------------------------------------------------------- reference
@@ -91,7 +107,7 @@ def run_hbgear(repeats, ds_max=0.05):
 
     from hbgear.continuation import PseudoArclength, continuation
     from hbgear.hb import HarmonicBalance
-    from hbgear.stability import hill_multipliers, is_stable
+    from hbgear.stability import hill_multipliers, hill_multipliers_batch, is_stable
     from hbgear.system import Duffing
 
     t0 = time.perf_counter()
@@ -111,19 +127,27 @@ def run_hbgear(repeats, ds_max=0.05):
                             tolerance=TOLERANCE, progress=False)
 
     def hill(branch):
+        return hill_multipliers_batch(hb, np.asarray(branch.z), np.asarray(branch.p), system)
+
+    def hill_per_point(branch):
         return [hill_multipliers(hb, branch.z[i], float(branch.p[i]), system) for i in range(len(branch))]
 
     branch = curve()
     multipliers = hill(branch)
+    hill_per_point(branch)
     first = time.perf_counter() - t0
-    t_curve, t_hill = [], []
+    t_curve, t_hill, t_single = [], [], []
     for _ in range(repeats):
         a = time.perf_counter()
         branch = curve()
         b = time.perf_counter()
         multipliers = hill(branch)
+        c = time.perf_counter()
+        single = hill_per_point(branch)
         t_curve.append(b - a)
-        t_hill.append(time.perf_counter() - b)
+        t_hill.append(c - b)
+        t_single.append(time.perf_counter() - c)
+    same = max(float(max_pair_distance(m, s)) for m, s in zip(multipliers, single))
     stable = np.array([is_stable(m) for m in multipliers])
     return {
         "tool": "hbgear",
@@ -132,6 +156,8 @@ def run_hbgear(repeats, ds_max=0.05):
         "first_run_s": first,
         "curve_s": statistics.median(t_curve),
         "hill_s": statistics.median(t_hill),
+        "hill_per_point_call_s": statistics.median(t_single),
+        "hill_batch_vs_single_max_diff": same,
         "unstable_points": int(np.sum(~stable)),
         "w": np.asarray(branch.p).tolist(),
         "coeffs": np.asarray(branch.z).tolist(),
@@ -260,18 +286,25 @@ def run(quick=False, repeats=None):
 
 def table(rows):
     head = f"{'tool':52s} {'points':>6s} {'first run [s]':>13s} {'curve [s]':>9s} {'per point [ms]':>14s} " \
-           f"{'Hill all pts [s]':>16s} {'err vs TI':>9s}"
+           f"{'Hill all pts [s]':>16s} {'Hill/pt [ms]':>12s} {'err vs TI':>9s}"
     lines = [head, "-" * len(head)]
     for r in rows:
         hill = "-" if r["hill_s"] is None else f"{r['hill_s']:.3f}"
+        hill_pt = "-" if r["hill_s"] is None else f"{1e3 * r['hill_s'] / max(r['points'], 1):.3f}"
         lines.append(f"{r['tool']:52s} {r['points']:6d} {r['first_run_s']:13.2f} {r['curve_s']:9.3f} "
-                     f"{r['per_point_ms']:14.2f} {hill:>16s} {r['error_vs_ti']:9.1e}")
+                     f"{r['per_point_ms']:14.2f} {hill:>16s} {hill_pt:>12s} {r['error_vs_ti']:9.1e}")
     base = [r for r in rows if r["tool"].startswith("hbgear (ds_max")] or rows[:1]
+    b = base[0]
+    with_hill = 1e3 * (b["curve_s"] + b["hill_s"]) / b["points"]
+    lines.append(f"Hill per point ({b['tool']}): batched {1e3 * b['hill_s'] / b['points']:.3f} ms, one call per "
+                 f"point {1e3 * b['hill_per_point_call_s'] / b['points']:.3f} ms "
+                 f"({b['hill_per_point_call_s'] / b['hill_s']:.1f}x; max |difference| of the multipliers "
+                 f"{b['hill_batch_vs_single_max_diff']:.1e})")
     for r in rows:
         if not r["tool"].startswith("hbgear"):
             lines.append(f"speed-up per point, hbgear (same point count, curve only) vs {r['tool']}: "
-                         f"{r['per_point_ms'] / base[0]['per_point_ms']:.1f}x; with Hill on every point: "
-                         f"{r['per_point_ms'] / (1e3 * (base[0]['curve_s'] + base[0]['hill_s']) / base[0]['points']):.1f}x")
+                         f"{r['per_point_ms'] / b['per_point_ms']:.1f}x; with Hill (batched) on every point "
+                         f"({with_hill:.2f} ms): {r['per_point_ms'] / with_hill:.1f}x")
     return "\n".join(lines)
 
 

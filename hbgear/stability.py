@@ -16,11 +16,14 @@ has modulus below one (trivial rigid-body multipliers excepted). Three ways to g
 - **Variational equations** (:func:`monodromy_variational`): ``solve_ivp`` over one base
   period, segment by segment between the breakpoints, with ``Q_q``, ``Q_qd`` from ``jax.jacfwd``
   of :meth:`~hbgear.model.GearPairModel.generalized_force` along the periodic solution.
-- **Hill's method** (:func:`hill_multipliers`) on the harmonic-balance Jacobian: the quadratic
-  eigenproblem ``(J + lam D1 + lam^2 D2) v = 0`` is linearised (companion form); of its
-  ``2 n (2H+1)`` eigenvalues, the ``2n`` whose eigenvectors are most concentrated on the
-  central harmonics are kept (Lazarus & Thomas 2010), with copies (``lam + i k w``, same
-  multiplier) skipped; multipliers ``exp(lam T)``, ``T = 2 pi / w``.
+- **Hill's method** (:func:`hill_multipliers`, :func:`hill_multipliers_batch`) on the
+  harmonic-balance Jacobian: of the quadratic eigenproblem ``(J + lam D1 + lam^2 D2) v = 0``,
+  whose ``2 n (2H+1)`` eigenvalues come in families of copies ``lam + i k w`` (one multiplier
+  each), the ``2n`` members whose eigenvectors are most concentrated on the central harmonics
+  are kept (Lazarus & Thomas 2010); multipliers ``exp(lam T)``, ``T = 2 pi / w``. By default
+  only those central eigenpairs are computed (refined from a low-harmonic sub-problem, batched
+  over points, see :mod:`hbgear.hill`); ``method="dense"`` takes all eigenpairs of the companion
+  linearisation instead, with the same result.
 
 Trivial multipliers: with the ``"reaction"`` boundary the coordinate ``u`` has no restoring
 force, so the linearisation has the exponent 0 twice (a Jordan block: ``u = const``,
@@ -40,8 +43,6 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-import scipy.linalg
-from threadpoolctl import ThreadpoolController
 
 __all__ = [
     "TRIVIAL_TOL",
@@ -49,7 +50,9 @@ __all__ = [
     "classify",
     "floquet_multipliers",
     "hill_exponents",
+    "hill_exponents_batch",
     "hill_multipliers",
+    "hill_multipliers_batch",
     "is_stable",
     "max_abs_multiplier",
     "model_at_contact_ratio",
@@ -462,93 +465,62 @@ def monodromy_variational(
 # ============================================================================ Hill's method
 
 
-def _harmonic_centre(vectors: np.ndarray, ndof: int, harmonics: int) -> np.ndarray:
-    """Energy-weighted mean signed harmonic index of each eigenvector (columns)."""
-    block = 2 * harmonics + 1
-    v = vectors.reshape(ndof, block, -1)
-    a, b = v[:, 1::2], v[:, 2::2]
-    plus = np.sum(np.abs(a - 1j * b) ** 2, axis=0) / 4.0  # (H, nev): e^{+ik tau}
-    minus = np.sum(np.abs(a + 1j * b) ** 2, axis=0) / 4.0
-    zero = np.sum(np.abs(v[:, 0]) ** 2, axis=0)
-    k = np.arange(1, harmonics + 1)[:, None]
-    total = zero + plus.sum(axis=0) + minus.sum(axis=0)
-    return (k * (plus - minus)).sum(axis=0) / np.maximum(total, 1e-300)
+def _zero_tol(system, drop_trivial: bool):
+    """Exponent tolerance (``mu = lam / w``) of the trivial pair, or ``None`` when none is dropped."""
+    if drop_trivial and getattr(system, "free_mean_dof", None) is not None:
+        return TRIVIAL_TOL / (2.0 * np.pi)
+    return None
 
 
-_BLAS_CONTROLLER: list = []
+def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
+                         method: str = "auto"):
+    """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
+
+    Small problems get their Hill matrices from one jitted, vmapped call per chunk of points;
+    the refinement runs stacked over all points (:func:`hbgear.hill.refined_central_batch`).
+    On the Duffing benchmark (H = 7) this is several times cheaper per point than one call per
+    point.
+    """
+    from .hill import central_exponents, hill_quadratic
+
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    if ps.size == 0:
+        return []
+    a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
+    mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
+                            copy_tol=copy_tol, method=method)
+    if len({len(mu) for mu in mus}) == 1:  # one stacked sort (the usual case: no point lost a trivial)
+        mu = np.stack(mus)
+        mult = np.exp(2.0 * np.pi * mu)
+        order = np.argsort(-np.abs(mult), axis=1, kind="stable")
+        lam = np.take_along_axis(mu, order, axis=1) * w[:, None]
+        mult = np.take_along_axis(mult, order, axis=1)
+        return list(zip(lam, mult))
+    out = []
+    for mu, wk in zip(mus, w):
+        mult = np.exp(2.0 * np.pi * mu)
+        order = np.argsort(-np.abs(mult), kind="stable")
+        out.append((mu[order] * wk, mult[order]))
+    return out
 
 
-def _single_thread_blas():
-    """Context limiting BLAS to one thread; the controller scans the libraries once (a fresh
-    ``threadpool_limits`` rescans them: ~1 ms per call, more than a small eigenproblem)."""
-    if not _BLAS_CONTROLLER:
-        _BLAS_CONTROLLER.append(ThreadpoolController())
-    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
-
-
-def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6):
+def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6, method: str = "auto"):
     """The ``2n`` Floquet exponents picked from the Hill spectrum, and their multipliers.
 
     **Returns:** ``(lam, mult)``: exponents [1/s] and multipliers ``exp(lam T)`` over the base
     period ``T = 2 pi / w`` (``w = w_mesh / nu``), sorted by decreasing ``|mult|``.
 
-    Selection: the companion linearisation of ``(J + mu w D1 + mu^2 w^2 D2) v = 0``
-    (``lam = mu w``, which keeps the problem well scaled) is solved for all eigenpairs; each
-    eigenvector gets the energy-weighted mean of its signed harmonic index (0 for a Floquet
-    eigenfunction centred on the central harmonics, ``-k`` for the copy ``lam + i k w``). The
-    most central ones are taken first; a candidate whose multiplier equals (to `copy_tol`) one
-    already taken is a copy and is skipped (this resolves the tie at half-integer centres of
-    real negative multipliers, where ``sigma +- i w/2`` are copies of one family), until
-    ``2n`` are found (repeated multipliers are then filled in from the skipped ones).
-    With the reaction boundary the (at most two) exponents within ``TRIVIAL_TOL`` of 0
-    are dropped.
+    Of every family of copies ``lam + i k w`` of the quadratic eigenproblem
+    ``(J + mu w D1 + mu^2 w^2 D2) v = 0`` (``lam = mu w``) the member whose eigenvector is most
+    concentrated on the central harmonics is kept (:mod:`hbgear.hill`). `method`: ``"dense"``
+    (all eigenpairs of the companion linearisation) or ``"refined"`` = ``"auto"`` (the central
+    eigenpairs only, by inverse iteration seeded from the low harmonics; the dense way where
+    that is not confident): the same exponents either way (to ~1e-13 in the tests).
+    With the reaction boundary the (at most two) exponents within ``TRIVIAL_TOL`` of 0 are
+    dropped.
     """
-    import jax.numpy as jnp
-
-    jz, d1, d2 = (np.asarray(x, dtype=float) for x in hb.hill_matrices(jnp.asarray(z), p, system))
-    w = float(hb.base_frequency(system, p))
-    size = jz.shape[0]
-    rhs = np.linalg.solve(w * w * d2, np.hstack([jz, w * d1]))
-    companion = np.zeros((2 * size, 2 * size))
-    companion[:size, size:] = np.eye(size)
-    companion[size:, :size] = -rhs[:, :size]
-    companion[size:, size:] = -rhs[:, size:]
-    with _single_thread_blas():
-        # threads only add synchronisation to an eigenproblem this small (260 at H=32):
-        # 0.1 s single-threaded against 0.5-2 s threaded on a loaded 2-core machine
-        mu, vec = scipy.linalg.eig(companion)
-    centre = _harmonic_centre(vec[:size], hb.ndof, hb.harmonics)
-    mult_all = np.exp(2.0 * np.pi * mu)
-    need = 2 * hb.ndof
-    taken: list[int] = []
-    seen: list[complex] = []
-    trivial = 0
-    if drop_trivial and getattr(system, "free_mean_dof", None) is not None:
-        near_zero = [i for i in np.argsort(np.abs(mu))[:2] if abs(mu[i]) < TRIVIAL_TOL / (2 * np.pi)]
-        trivial = len(near_zero)
-        seen.extend(mult_all[near_zero])
-        skip = set(near_zero)
-    else:
-        skip = set()
-    order = [i for i in np.argsort(np.abs(centre), kind="stable") if i not in skip]
-    skipped = []
-    for i in order:
-        if len(taken) == need - trivial:
-            break
-        m = mult_all[i]
-        if any(abs(m - s) <= copy_tol * max(1.0, abs(s)) for s in seen):
-            skipped.append(i)
-            continue
-        taken.append(i)
-        seen.append(m)
-    for i in skipped:  # genuinely repeated multipliers
-        if len(taken) == need - trivial:
-            break
-        taken.append(i)
-    taken = np.asarray(taken, dtype=int)
-    lam, mult = mu[taken] * w, mult_all[taken]
-    order = np.argsort(-np.abs(mult), kind="stable")
-    return lam[order], mult[order]
+    return hill_exponents_batch(hb, np.asarray(z)[None], [p], system, drop_trivial=drop_trivial,
+                                copy_tol=copy_tol, method=method)[0]
 
 
 def hill_multipliers(hb, z, p, system, **kwargs) -> np.ndarray:
@@ -562,6 +534,11 @@ def hill_multipliers(hb, z, p, system, **kwargs) -> np.ndarray:
     the base period ``2 pi nu / w_mesh``, sorted by decreasing modulus.
     """
     return hill_exponents(hb, z, p, system, **kwargs)[1]
+
+
+def hill_multipliers_batch(hb, zs, ps, system, **kwargs) -> list[np.ndarray]:
+    """:func:`hill_multipliers` at many points of one problem (see :func:`hill_exponents_batch`)."""
+    return [mult for _, mult in hill_exponents_batch(hb, zs, ps, system, **kwargs)]
 
 
 # ============================================================================ dispatch
@@ -666,6 +643,7 @@ def _row_for_model(model, omegas: np.ndarray, settings: _HBSettings):
 
     out = np.full(omegas.size, np.nan)
     z = None
+    solved, zs = [], []
     for k, omega in enumerate(omegas):
         try:
             sol = solve_periodic(
@@ -675,10 +653,14 @@ def _row_for_model(model, omegas: np.ndarray, settings: _HBSettings):
             z = None
             continue
         z = sol.z
+        solved.append(k)
+        zs.append(np.asarray(sol.z))
         hb = HarmonicBalance(model.ndof, sol.harmonics, sol.nu, sol.samples)
-        mult = hill_multipliers(hb, sol.z, float(omega), GearSystem(model))
+    if solved:
+        # one batched Hill call for the row (all points share hb: same H, nu, N)
+        mults = hill_multipliers_batch(hb, np.stack(zs), omegas[solved], GearSystem(model))
         # per mesh period, comparable with the linear maps
-        out[k] = max_abs_multiplier(mult) ** (1.0 / sol.nu)
+        out[solved] = [max_abs_multiplier(m) ** (1.0 / hb.nu) for m in mults]
     return out
 
 

@@ -166,19 +166,61 @@ def _keeps_contact(model, hb, z, p) -> bool:
     return bool(np.min(np.abs(x)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(x)) + 1e-15)
 
 
+#: Points per call of :func:`hbgear.stability.hill_multipliers_batch` (one vmapped Hill-matrix
+#: evaluation and one stacked eigen-decomposition for small problems; the progress bar steps
+#: by this much).
+HILL_BATCH = 32
+
+
+def _hill_in_batches(hb, system, p, z, indices, out, progress, label):
+    """Hill multipliers at the points `indices` into ``out[i]``, a batch at a time.
+
+    A batch that fails is redone point by point, so one bad point costs only itself (NaN).
+    **Returns:** the failure messages.
+    """
+    from ..stability import hill_multipliers, hill_multipliers_batch
+
+    p, z = np.asarray(p, dtype=float), np.asarray(z, dtype=float)
+    failures = []
+    batches = [indices[k : k + HILL_BATCH] for k in range(0, len(indices), HILL_BATCH)]
+    bar = None
+    if indices and progress is not False and (progress or sys.stderr.isatty()):
+        try:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=len(indices), desc=label, leave=False, file=sys.stderr)
+        except ImportError:  # pragma: no cover
+            pass
+    for batch in batches:
+        try:
+            for i, m in zip(batch, hill_multipliers_batch(hb, z[batch], p[batch], system)):
+                out[i] = np.asarray(m)
+        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+            for i in batch:
+                try:
+                    out[i] = np.asarray(hill_multipliers(hb, jnp.asarray(z[i]), float(p[i]), system))
+                except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
+                    failures.append(f"{rad_s_to_rpm(p[i]):.6g} rpm: {type(exc).__name__}: {exc}")
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    return failures
+
+
 def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
     """Floquet multipliers over the base period (``hb.nu`` mesh periods) at every point ``(p[i], z[i])``.
 
     Exact monodromy (:func:`hbgear.stability.multipliers_linear` per mesh period, batched, raised
     to ``nu``) for linear models and, for models whose only non-linearity is the backlash, at the
     points that keep contact (:func:`_linear_equivalent`); Hill's method
-    (:func:`hbgear.stability.hill_multipliers`) at the others.
+    (:func:`hbgear.stability.hill_multipliers_batch`, in batches) at the others.
 
     **Returns:** ``(multipliers, method, warning)``: a list of arrays (``None`` where it failed),
     the method text and a warning (or ``None``).
     **Raises:** `ImportError` if :mod:`hbgear.stability` is unavailable.
     """
-    from ..stability import hill_multipliers, multipliers_linear
+    from ..stability import multipliers_linear
 
     model = system.model
     n = len(p)
@@ -203,22 +245,9 @@ def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
             fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
             hill_idx = sorted(hill_idx + exact_idx)
             exact_idx = []
-    failures = []
-    indices = hill_idx
-    if hill_idx and progress is not False and (progress or sys.stderr.isatty()):
-        try:
-            from tqdm.auto import tqdm
-
-            indices = tqdm(hill_idx, desc=label, leave=False, file=sys.stderr)
-        except ImportError:  # pragma: no cover
-            pass
-    for i in indices:
-        try:
-            out[i] = np.asarray(hill_multipliers(hb, jnp.asarray(z[i]), float(p[i]), system))
-        except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
-            failures.append(f"{rad_s_to_rpm(p[i]):.6g} rpm: {type(exc).__name__}: {exc}")
+    failures = _hill_in_batches(hb, system, p, z, hill_idx, out, progress, label)
     exact_text = "exact monodromy (hbgear.stability.multipliers_linear)"
-    hill_text = "Hill's method (hbgear.stability.hill_multipliers)"
+    hill_text = "Hill's method (hbgear.stability.hill_multipliers_batch)"
     if not hill_idx:
         method = exact_text
     elif not exact_idx:

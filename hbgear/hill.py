@@ -1,0 +1,591 @@
+r"""Hill's method: the central Floquet exponents of the quadratic Hill eigenproblem.
+
+With ``mu = lam / w`` (``w`` the base frequency) the linearised harmonic-balance problem is
+
+    P(mu) v = (A0 + mu A1 + mu^2 A2) v = 0,    A0 = J,  A1 = w D1,  A2 = w^2 D2
+
+(:meth:`hbgear.hb.HarmonicBalance.hill_matrices`), of size ``N = n (2H+1)``. Its ``2N``
+eigenvalues come in families ``mu + i k`` (copies: the same Floquet multiplier
+``exp(2 pi mu)``); of every family the member whose eigenvector is most concentrated on the
+central harmonics is the Floquet exponent (Lazarus & Thomas 2010). Two ways to get them, with
+the same result:
+
+- **dense** (:func:`dense_central`): all eigenpairs of the companion linearisation, batched over
+  points (one stacked :func:`numpy.linalg.eig`), then :func:`select_central`: the candidates
+  sorted by ``|centre|`` (:func:`harmonic_centre`), a copy of an exponent already taken
+  skipped, until ``2n`` are found.
+- **refined** (:func:`refined_central_batch`, :func:`refined_central`): the same selection on
+  the Galerkin sub-problem of the low harmonics ``|k| <= Hs`` (its rows and columns; small and
+  cheap) gives one seed per family; each is refined on the full problem by inverse iteration
+  with the Rayleigh functional (quadratic convergence, one solve per step), then walked along
+  its family (``mu -> mu +- i``, eigenvector shifted by one harmonic) while ``|centre|``
+  decreases: the centre falls by one per copy, so a local minimum along the family is the
+  family's most central member, the one the dense selection keeps. A point is settled this way
+  only if every refinement converged onto the expected copy and ``2n`` families with distinct
+  multipliers were found; otherwise the dense way decides (:func:`central_exponents`).
+
+Copies are recognised by their multiplier (to ``copy_tol``) and, for a real multiplier, as
+conjugates: the two members ``a +- i/2`` of a real negative multiplier's family (or ``a +- i k``
+of a real positive one) are exact conjugates, and the truncation can move their multipliers
+apart by more than ``copy_tol`` (1e-6 to 1e-5 at H = 4..8 in a parametric tongue, ~1e-6 at
+H = 32 near the tongue of the NLTV pair), which used to let one family be taken twice and
+another be missed.
+
+With a free mean coordinate (reaction boundary) the exponent 0 is a Jordan block (``u = const``,
+``u = t``); the (at most two) exponents within ``zero_tol`` of 0 are dropped.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+import numpy as np
+import scipy.linalg
+from threadpoolctl import ThreadpoolController
+
+__all__ = [
+    "dense_central",
+    "harmonic_centre",
+    "hill_quadratic",
+    "refined_central",
+    "refined_central_batch",
+    "select_central",
+    "central_exponents",
+]
+
+#: Above this many unknowns ``N = n (2H+1)`` the Hill matrices are computed one point at a time
+#: and a point the batched refinement leaves unsettled gets a second, single-point refinement
+#: before the dense way (below it the stacked dense eigen-decomposition is the cheaper rescue).
+REFINE_MIN_SIZE = 48
+
+#: Half-width of the harmonic window of the sub-problem that seeds the refinement.
+SEED_HARMONICS = 6
+
+#: A seed whose multiplier is within this (relative) of a family already found is not refined:
+#: in the small sub-problem copies differ by up to ~1e-4 (more at low speeds, where a seed
+#: that slips through only costs a refinement that lands on a member already found).
+SEED_COPY_TOL = 1e-3
+
+#: The refinement stops after a step below this (relative to ``max(1, |mu|)``): convergence is
+#: quadratic, so the exponent is then exact to ~``STEP_TOL^2`` (the tests see <= 1e-11 relative
+#: between the multipliers of the refined and the dense ways).
+STEP_TOL = 1e-7
+
+#: Real offset of the two restarts of a seed whose refinement does not converge (it sits
+#: between two exponents ``a1 + i b``, ``a2 + i b``, e.g. a split real negative pair that the
+#: sub-problem still sees as one complex pair: ``|a1 - a2|`` ~ 0.07 at 3800 rpm on the NLTV pair).
+SPLIT_OFFSET = 0.05
+
+#: Points per stacked refinement: about this many bytes per stack of complex pencils (7 points at
+#: N = 130, all of a Duffing curve at N = 15); larger stacks only add memory traffic.
+BATCH_BYTES = 2e6
+
+_BLAS_CONTROLLER: list = []
+
+
+def single_thread_blas():
+    """Context limiting BLAS to one thread; the controller scans the libraries once (a fresh
+    ``threadpool_limits`` rescans them: ~1 ms per call, more than a small eigenproblem)."""
+    if not _BLAS_CONTROLLER:
+        _BLAS_CONTROLLER.append(ThreadpoolController())
+    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
+
+
+# ============================================================================ the matrices
+
+_BATCHED: dict = {}
+
+
+def hill_quadratic(hb, zs, ps, system, chunk: int = 32):
+    """``(A0, A1, A2, w)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``: shapes ``(m, N, N)``, ``(m,)``.
+
+    Small problems (``N <= REFINE_MIN_SIZE``): one jitted, vmapped
+    :meth:`~hbgear.hb.HarmonicBalance.hill_matrices` call per `chunk` points (the last chunk
+    padded, so one compilation serves every curve length), which removes the per-call
+    overhead that dominates there. Larger ones: one call per point (vmapping the sampled
+    Toeplitz blocks is slower per point on the CPU than the single calls).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    zs = np.atleast_2d(np.asarray(zs, dtype=float))
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    m = len(ps)
+    w = np.array([float(hb.base_frequency(system, p)) for p in ps])
+    if hb.ndof * (2 * hb.harmonics + 1) > REFINE_MIN_SIZE:
+        parts = [hb.hill_matrices(jnp.asarray(z), float(p), system) for z, p in zip(zs, ps)]
+        a0, d1, d2 = (np.stack([np.asarray(x[k], dtype=float) for x in parts]) for k in range(3))
+    else:
+        fn = _BATCHED.get(hb)
+        if fn is None:
+            fn = _BATCHED[hb] = jax.jit(jax.vmap(hb._hill_matrices_jit, in_axes=(0, 0, None, None)))
+        quad = hb.quadrature(system)
+        size = min(chunk, m)
+        parts = []
+        for lo in range(0, m, size):
+            idx = np.minimum(np.arange(lo, lo + size), m - 1)
+            keep = min(size, m - lo)
+            parts.append([np.asarray(x, dtype=float)[:keep] for x in fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, quad)])
+        a0, d1, d2 = (np.concatenate([x[k] for x in parts]) for k in range(3))
+    return a0, w[:, None, None] * d1, (w * w)[:, None, None] * d2, w
+
+
+# ============================================================================ selection
+
+
+def harmonic_centre(vectors: np.ndarray, ndof: int, harmonics: int) -> np.ndarray:
+    """Energy-weighted mean signed harmonic index of each eigenvector (columns).
+
+    `vectors`: shape ``(..., N, k)`` in the real basis ``[a0, a1, b1, a2, b2, ...]`` per
+    coordinate; ``a cos + b sin`` carries ``|a - i b|^2 / 4`` on ``e^{+ik tau}`` and
+    ``|a + i b|^2 / 4`` on ``e^{-ik tau}``. Returns shape ``(..., k)``.
+    """
+    block = 2 * harmonics + 1
+    lead = vectors.shape[:-2]
+    v = vectors.reshape(lead + (ndof, block, vectors.shape[-1]))
+    a, b = v[..., 1::2, :], v[..., 2::2, :]
+    plus = np.sum(np.abs(a - 1j * b) ** 2, axis=-3) / 4.0  # (..., H, k)
+    minus = np.sum(np.abs(a + 1j * b) ** 2, axis=-3) / 4.0
+    zero = np.sum(np.abs(v[..., 0, :]) ** 2, axis=-2)
+    k = np.arange(1, harmonics + 1)[:, None]
+    total = zero + plus.sum(axis=-2) + minus.sum(axis=-2)
+    return (k * (plus - minus)).sum(axis=-2) / np.maximum(total, 1e-300)
+
+
+#: Tie-break of the centrality: an eigenpair and its conjugate have exactly opposite centres,
+#: and for a real negative multiplier they are two copies (``a +- i/2``) of one family; the
+#: one with ``Im mu >= 0`` is preferred, so the choice does not depend on rounding.
+_TIE = 1e-9
+
+
+def centrality(mu, centre):
+    """Sort key of the selection: ``|centre|``, ties between conjugates to ``Im mu >= 0``."""
+    return np.abs(centre) - _TIE * np.where(np.imag(mu) >= 0.0, 1.0, -1.0)
+
+
+#: ``|2 Im mu - round(2 Im mu)|`` below this: the family of ``mu`` is its own conjugate (a real
+#: multiplier), so the conjugate eigenpair is one of its copies however far the truncated
+#: problem has moved the two apart (at H = 32 their multipliers can differ by more than 1e-6).
+SELF_CONJUGATE_TOL = 1e-5
+
+
+def _is_self_conjugate(mu: complex, tol: float = SELF_CONJUGATE_TOL) -> bool:
+    """``mu`` and ``conj(mu)`` in one family: ``Im mu`` a multiple of 1/2."""
+    return abs(2.0 * mu.imag - round(2.0 * mu.imag)) <= tol
+
+
+def _is_copy(mu_i, m_i, taken_mu, taken_mult, copy_tol) -> bool:
+    """``mu_i`` a copy of a taken exponent: the same multiplier (to `copy_tol`), or the exact
+    conjugate of a taken exponent of a self-conjugate family."""
+    for mu_j, m_j in zip(taken_mu, taken_mult):
+        if abs(m_i - m_j) <= copy_tol * max(1.0, abs(m_j)):
+            return True
+        if abs(mu_i - np.conj(mu_j)) <= 1e-12 * max(1.0, abs(mu_j)) and _is_self_conjugate(mu_j):
+            return True
+    return False
+
+
+def _trivial(mu: np.ndarray, zero_tol: float) -> list[int]:
+    """Indices of the (at most two) exponents within `zero_tol` of 0."""
+    return [int(i) for i in np.argsort(np.abs(mu))[:2] if abs(mu[i]) < zero_tol]
+
+
+def select_central(mu, centre, need: int, *, zero_tol: float | None = None, copy_tol: float = 1e-6):
+    """Indices of the ``need`` central exponents among the candidates ``mu`` (one point).
+
+    Candidates by increasing ``|centre|`` (:func:`centrality`); one whose multiplier ``exp(2 pi mu)`` equals (to
+    `copy_tol`) one already taken is a copy and skipped, and so is the conjugate of a taken
+    exponent of a self-conjugate family (the tie at half-integer centres of a real negative
+    multiplier, where ``sigma +- i/2`` belong to one family, whatever their distance); if fewer
+    than ``need`` are found, repeated multipliers are filled in from the skipped ones. With
+    `zero_tol`, the (at most two) exponents within it of 0 are dropped first (and ``need``
+    lowered by their number).
+
+    **Returns:** ``(indices, trivial, filled)``: the picks, how many trivial exponents were
+    dropped, and whether a skipped candidate had to be filled in.
+    """
+    mu = np.asarray(mu)
+    mult = np.exp(2.0 * np.pi * mu)
+    near_zero = _trivial(mu, zero_tol) if zero_tol is not None else []
+    seen_mu, seen = list(mu[near_zero]), list(mult[near_zero])
+    skip = set(near_zero)
+    want = need - len(near_zero)
+    taken: list[int] = []
+    skipped: list[int] = []
+    for i in np.argsort(centrality(mu, centre), kind="stable"):
+        if len(taken) == want:
+            break
+        if i in skip:
+            continue
+        if _is_copy(mu[i], mult[i], seen_mu, seen, copy_tol):
+            skipped.append(int(i))
+            continue
+        taken.append(int(i))
+        seen_mu.append(mu[i])
+        seen.append(mult[i])
+    filled = False
+    for i in skipped:  # genuinely repeated multipliers
+        if len(taken) == want:
+            break
+        taken.append(i)
+        filled = True
+    return np.asarray(taken, dtype=int), len(near_zero), filled
+
+
+# ============================================================================ dense
+
+
+def _companion(a0, a1, a2):
+    """``C = [[0, I], [-A2^-1 A0, -A2^-1 A1]]`` with ``C (v, mu v) = mu (v, mu v)``, batched."""
+    m, size = a0.shape[0], a0.shape[-1]
+    rhs = np.linalg.solve(a2, np.concatenate([a0, a1], axis=-1))
+    comp = np.zeros((m, 2 * size, 2 * size))
+    comp[:, :size, size:] = np.eye(size)
+    comp[:, size:] = -rhs
+    return comp
+
+
+def dense_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+    """Central exponents ``mu`` of every point (a list of arrays) from all eigenpairs."""
+    with single_thread_blas():
+        # threads only add synchronisation to eigenproblems this small
+        mu, vec = np.linalg.eig(_companion(a0, a1, a2))
+    size = a0.shape[-1]
+    centre = harmonic_centre(vec[:, :size], ndof, harmonics)
+    out = []
+    for k in range(len(mu)):
+        idx, _, _ = select_central(mu[k], centre[k], 2 * ndof, zero_tol=zero_tol, copy_tol=copy_tol)
+        out.append(mu[k][idx])
+    return out
+
+
+# ============================================================================ refined
+
+
+def _window(ndof: int, harmonics: int, seed: int) -> np.ndarray:
+    """Indices of the harmonics ``0..seed`` (cos and sin) of every coordinate in the full vector."""
+    block = 2 * harmonics + 1
+    return (np.arange(ndof)[:, None] * block + np.arange(2 * seed + 1)[None]).ravel()
+
+
+def _shift_harmonics(v: np.ndarray, ndof: int, harmonics: int, k: int) -> np.ndarray:
+    """The eigenvector of the copy ``mu + i k`` from that of ``mu``: complex harmonic ``j`` of
+    the periodic factor moves to ``j - k`` (``e^{(mu + ik) tau} p'(tau) = e^{mu tau} p(tau)``)."""
+    block = 2 * harmonics + 1
+    x = v.reshape(ndof, block)
+    c = np.zeros((ndof, 2 * harmonics + 1), dtype=complex)  # complex coefficients, index j + H
+    c[:, harmonics] = x[:, 0]
+    c[:, harmonics + 1 :] = (x[:, 1::2] - 1j * x[:, 2::2]) / 2.0
+    c[:, harmonics - 1 :: -1] = (x[:, 1::2] + 1j * x[:, 2::2]) / 2.0
+    c = np.roll(c, -k, axis=1)
+    if k > 0:
+        c[:, -k:] = 0.0
+    elif k < 0:
+        c[:, :-k] = 0.0
+    out = np.empty_like(x, dtype=complex)
+    out[:, 0] = c[:, harmonics]
+    pos, neg = c[:, harmonics + 1 :], c[:, harmonics - 1 :: -1]
+    out[:, 1::2] = pos + neg
+    out[:, 2::2] = 1j * (pos - neg)
+    return out.ravel()
+
+
+def _rayleigh_root(a0, a1, a2, v, near):
+    """The root of ``v^H P(mu) v = 0`` nearest `near`."""
+    a, b, c = np.vdot(v, a2 @ v), np.vdot(v, a1 @ v), np.vdot(v, a0 @ v)
+    disc = np.sqrt(b * b - 4.0 * a * c + 0j)
+    roots = ((-b + disc) / (2.0 * a), (-b - disc) / (2.0 * a))
+    return min(roots, key=lambda r: abs(r - near))
+
+
+def _refine(a0, a1, a2, mu, v, *, tol=STEP_TOL, max_steps=8, fixed_steps=0):
+    """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
+    the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
+    ``tol max(1, |mu|)`` (see :data:`STEP_TOL`); the first `fixed_steps` steps keep the shift
+    (plain inverse iteration: picks the exponent nearest `mu` out of a close pair).
+    Returns ``(mu, v, converged)``."""
+    for step in range(max_steps):
+        lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
+        x = scipy.linalg.lu_solve(lu, a1 @ v + (2.0 * mu) * (a2 @ v), check_finite=False)
+        norm = np.linalg.norm(x)
+        if not np.isfinite(norm) or norm == 0.0:
+            return mu, v, False
+        v = x / norm
+        if step < fixed_steps:
+            continue
+        new = _rayleigh_root(a0, a1, a2, v, mu)
+        step, mu = abs(new - mu), new
+        if step <= tol * max(1.0, abs(mu)):
+            return mu, v, True
+    return mu, v, False
+
+
+def _is_conjugate_copy(mu, k) -> bool:
+    """The copy ``mu + i k`` is ``conj(mu)`` (``Im mu = -k/2``, a real multiplier's family): the
+    conjugate eigenpair, known without a refinement, with the opposite centre."""
+    return abs(2.0 * mu.imag + k) <= SELF_CONJUGATE_TOL
+
+
+def _most_central_member(a0, a1, a2, mu, v, ndof, harmonics, *, max_walk=6, fixed_steps=0):
+    """Refine ``(mu, v)`` and walk along its family to the member of least ``|centre|``.
+
+    Returns ``(mu, centre)`` or ``None`` when a refinement does not converge or lands off the
+    expected copy."""
+    mu, v, ok = _refine(a0, a1, a2, mu, v, fixed_steps=fixed_steps)
+    if not ok:
+        return None
+    c = float(harmonic_centre(v[:, None], ndof, harmonics)[0])
+    for _ in range(max_walk):
+        if abs(c) <= 0.25:  # a copy is one harmonic away: its |centre| is >= 0.75 > |c|
+            return mu, c
+        k = 1 if c > 0 else -1  # the copy mu + i k has centre c - k
+        if _is_conjugate_copy(mu, k):
+            nb_mu, nb_v, nb_c = np.conj(mu), np.conj(v), -c
+        else:
+            nb_mu, nb_v, ok = _refine(a0, a1, a2, mu + 1j * k, _shift_harmonics(v, ndof, harmonics, k))
+            if not ok or abs(nb_mu - (mu + 1j * k)) > 0.25:
+                return None
+            nb_c = float(harmonic_centre(nb_v[:, None], ndof, harmonics)[0])
+        if centrality(nb_mu, nb_c) >= centrality(mu, c):
+            return mu, c
+        mu, v, c = nb_mu, nb_v, nb_c
+    return None
+
+
+def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
+                    seed_harmonics: int = SEED_HARMONICS):
+    """Central exponents of one point (``(N, N)`` matrices) by refinement, or ``None``.
+
+    See the module docstring. Seeds are taken by increasing centrality from the sub-problem's
+    eigenpairs until ``2n`` families (less the trivial ones) are found; a seed whose
+    multiplier is within ``SEED_COPY_TOL`` of a family already found is skipped, one that walks
+    to a member already found counts once, and the conjugate of every complex family is added
+    without a refinement (real matrices). ``None`` when not confident: a refinement failed or
+    did not land on the expected copy, too many seeds were needed, or two families share a
+    multiplier (to `copy_tol`).
+    """
+    seed = min(seed_harmonics, harmonics)
+    win = _window(ndof, harmonics, seed)
+    sub = [x[np.ix_(win, win)][None] for x in (a0, a1, a2)]
+    with single_thread_blas():
+        mu_s, vec_s = np.linalg.eig(_companion(*sub))
+        mu_s, vec_s = mu_s[0], vec_s[0, : win.size]
+        near_zero = set(_trivial(mu_s, zero_tol)) if zero_tol is not None else set()
+        want = 2 * ndof - len(near_zero)
+        found: list[complex] = []
+        tries = 0
+        for i in np.argsort(centrality(mu_s, harmonic_centre(vec_s, ndof, seed)), kind="stable"):
+            if len(found) >= want or tries > 2 * want + 2:
+                break
+            m = np.exp(2.0 * np.pi * mu_s[i])
+            if i in near_zero or any(abs(m - np.exp(2.0 * np.pi * f)) <= SEED_COPY_TOL * max(1.0, abs(m))
+                                     for f in found):
+                continue
+            tries += 1
+            v = np.zeros(a0.shape[0], dtype=complex)
+            v[win] = vec_s[:, i]
+            v /= np.linalg.norm(v)
+            best = [_most_central_member(a0, a1, a2, mu_s[i], v, ndof, harmonics)]
+            if best[0] is None:
+                # the seed may sit between two close exponents (a complex pair of the sub-problem
+                # that is a split real pair in the full problem): one start on either side
+                best = [_most_central_member(a0, a1, a2, mu_s[i] + d, v, ndof, harmonics, fixed_steps=2)
+                        for d in (-SPLIT_OFFSET, SPLIT_OFFSET)]
+            if any(b is None for b in best):
+                return None
+            for mu_b, _ in best:
+                if any(abs(mu_b - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+                    continue  # a copy of a family already found (the sub-problem did not merge them)
+                found.append(mu_b)
+                if not _is_self_conjugate(mu_b):
+                    found.append(np.conj(mu_b))
+    return _distinct_families(found, want, copy_tol)
+
+
+# ============================================================================ refined, batched
+
+
+def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
+    """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
+    stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``."""
+    mu, v = mu.copy(), v.copy()
+    converged = np.zeros(len(mu), dtype=bool)
+    active = np.arange(len(mu))
+    for _ in range(max_steps):
+        if active.size == 0:
+            break
+        o, m, x = owner[active], mu[active], v[active, :, None]
+        c0, c1, c2 = a0[o], a1[o], a2[o]
+        pencil = c1 * m[:, None, None]
+        pencil += c0
+        pencil += c2 * (m * m)[:, None, None]
+        try:
+            y = np.linalg.solve(pencil, c1 @ x + (2.0 * m)[:, None, None] * (c2 @ x))
+        except np.linalg.LinAlgError:  # an exactly singular pencil: leave these to the single-point way
+            break
+        norm = np.linalg.norm(y[..., 0], axis=1)
+        bad = ~np.isfinite(norm) | (norm == 0.0)
+        y = y / np.where(bad, 1.0, norm)[:, None, None]
+        yh = y.conj()[..., 0]
+        qa = np.sum(yh * (c2 @ y)[..., 0], axis=1)
+        qb = np.sum(yh * (c1 @ y)[..., 0], axis=1)
+        qc = np.sum(yh * (c0 @ y)[..., 0], axis=1)
+        disc = np.sqrt(qb * qb - 4.0 * qa * qc + 0j)
+        r1, r2 = (-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa)
+        new = np.where(np.abs(r1 - m) <= np.abs(r2 - m), r1, r2)
+        done = np.abs(new - m) <= tol * np.maximum(1.0, np.abs(new))
+        mu[active], v[active] = new, y[..., 0]
+        converged[active[done & ~bad]] = True
+        active = active[~done & ~bad]
+    return mu, v, converged
+
+
+def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_walk=4):
+    """:func:`_most_central_member`'s walk for refined seeds, batched: every seed with
+    ``|centre| > 1/4`` has its neighbour copy towards the centre refined (one stacked solve per
+    step); a seed moves there while the centrality falls. A seed is left unconverged when a
+    neighbour does not converge onto the expected copy or the walk does not settle."""
+    centre = harmonic_centre(v.T, ndof, harmonics) if len(mu) else np.zeros(0)
+    open_ = np.flatnonzero(converged & (np.abs(centre) > 0.25))
+    for _ in range(max_walk):
+        if open_.size == 0:
+            return mu, v, centre, converged
+        k = np.where(centre[open_] > 0, 1, -1)
+        conj = np.abs(2.0 * mu[open_].imag + k) <= SELF_CONJUGATE_TOL  # see _is_conjugate_copy
+        nb_mu, nb_v = np.conj(mu[open_]), np.conj(v[open_])
+        nb_c, nb_ok = -centre[open_], np.ones(open_.size, dtype=bool)
+        other = np.flatnonzero(~conj)
+        if other.size:
+            s_other = open_[other]
+            start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(s_other, k[other])])
+            target = mu[s_other] + 1j * k[other]
+            r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, owner[s_other], target, start)
+            nb_mu[other], nb_v[other] = r_mu, r_v
+            nb_ok[other] = r_ok & (np.abs(r_mu - target) <= 0.25)
+            nb_c[other] = harmonic_centre(r_v.T, ndof, harmonics)
+        converged[open_[~nb_ok]] = False
+        better = nb_ok & (centrality(nb_mu, nb_c) < centrality(mu[open_], centre[open_]))
+        moved = open_[better]
+        mu[moved], v[moved], centre[moved] = nb_mu[better], nb_v[better], nb_c[better]
+        open_ = moved[np.abs(centre[moved]) > 0.25]
+    converged[open_] = False
+    return mu, v, centre, converged
+
+
+def _batch_seed_harmonics(harmonics: int) -> int:
+    """Seed window of the batched refinement: half the harmonics, at most SEED_HARMONICS."""
+    return max(1, min(SEED_HARMONICS, harmonics // 2))
+
+
+def _seed_picks(mu, mult, key, need: int, near_zero) -> list[int]:
+    """The seed selection of one point in plain Python (lists): by increasing `key`, skipping
+    the trivial ones and copies of a pick's multiplier to ``SEED_COPY_TOL``, then dropping a
+    pick whose conjugate is a pick too (the conjugate family comes without a refinement)."""
+    picks: list[int] = []
+    for i in sorted(range(len(key)), key=key.__getitem__):
+        if len(picks) == need:
+            break
+        if i in near_zero or any(abs(mult[i] - mult[j]) <= SEED_COPY_TOL * max(1.0, abs(mult[j])) for j in picks):
+            continue
+        picks.append(i)
+    tol = 1e-9 * max([1.0] + [abs(mu[i]) for i in picks])
+    return [i for i in picks
+            if not (mu[i].imag < -tol and any(abs(mu[i].conjugate() - mu[j]) <= tol for j in picks))]
+
+
+def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+    """:func:`refined_central` for a stack of points: a list with ``None`` where a point is not
+    settled this way (a refinement or a walk step did not converge onto the expected copy, or
+    not ``2n`` distinct families were found).
+
+    The seed sub-problems (:func:`_batch_seed_harmonics`) are one stacked eigen-decomposition,
+    every refinement step and every walk step one stacked solve over all points: this removes
+    the per-point call overhead that dominates small problems (Duffing, H = 7).
+    """
+    m, size = a0.shape[0], a0.shape[-1]
+    seed = _batch_seed_harmonics(harmonics)
+    win = _window(ndof, harmonics, seed)
+    with single_thread_blas():
+        mu_s, vec_s = np.linalg.eig(_companion(*(x[:, win][:, :, win] for x in (a0, a1, a2))))
+        vec_s = vec_s[:, : win.size]
+        key = centrality(mu_s, harmonic_centre(vec_s, ndof, seed)).tolist()
+        mult_s = np.exp(2.0 * np.pi * mu_s).tolist()
+        mu_list = mu_s.tolist()
+        owner, picks_of, want = [], [], []
+        for k in range(m):
+            near_zero = _trivial(mu_s[k], zero_tol) if zero_tol is not None else []
+            picks = _seed_picks(mu_list[k], mult_s[k], key[k], 2 * ndof - len(near_zero), set(near_zero))
+            want.append(2 * ndof - len(near_zero))
+            owner.extend([k] * len(picks))
+            picks_of.extend(picks)
+        owner = np.asarray(owner, dtype=int)
+        v0 = np.zeros((len(owner), size), dtype=complex)
+        if len(owner):
+            v0[:, win] = vec_s[owner, :, np.asarray(picks_of, dtype=int)]
+            v0 /= np.linalg.norm(v0, axis=1, keepdims=True)
+        mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0)
+        mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics)
+    out: list = [None] * m
+    settled = np.ones(m, dtype=bool)
+    np.logical_and.at(settled, owner, converged)
+    mu_list, owner_list = mu.tolist(), owner.tolist()
+    found_of: list[list[complex]] = [[] for _ in range(m)]
+    for k, x in zip(owner_list, mu_list):
+        found = found_of[k]
+        if any(abs(x - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+            continue  # two seeds walked to one member
+        found.append(x)
+        if not _is_self_conjugate(x):
+            found.append(x.conjugate())
+    for k in range(m):
+        if settled[k]:
+            out[k] = _distinct_families(found_of[k], want[k], copy_tol)
+    return out
+
+
+def _distinct_families(found, want: int, copy_tol: float):
+    """``found`` as an array if it holds `want` exponents with distinct multipliers, else ``None``."""
+    if len(found) != want:
+        return None
+    mult = [cmath.exp(2.0 * math.pi * x) for x in found]
+    for i in range(len(mult)):
+        for j in range(i):
+            if abs(mult[i] - mult[j]) <= copy_tol * max(1.0, abs(mult[i])):
+                return None  # a repeated multiplier: let the dense way decide
+    return np.asarray(found, dtype=complex)
+
+
+# ============================================================================ dispatch
+
+
+def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
+                      method: str = "auto"):
+    """Central exponents ``mu = lam / w`` of a stack of points, shapes ``(m, N, N)``.
+
+    `method`: ``"dense"`` (:func:`dense_central`) or ``"refined"`` (= ``"auto"``):
+    :func:`refined_central_batch` for all points, then (``N > REFINE_MIN_SIZE``)
+    :func:`refined_central` with its larger seed window where that was not settled, then
+    :func:`dense_central` (stacked) for the rest; the same exponents as the dense way.
+    Returns a list of ``m`` arrays.
+    """
+    if method not in ("auto", "dense", "refined"):
+        raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
+    if method == "dense":
+        return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    group = max(1, int(BATCH_BYTES // (16 * a0.shape[-1] ** 2)))  # keep the stacked pencils in cache
+    out = []
+    for lo in range(0, len(a0), group):
+        part = slice(lo, lo + group)
+        out += refined_central_batch(a0[part], a1[part], a2[part], ndof, harmonics, zero_tol=zero_tol,
+                                     copy_tol=copy_tol)
+    if a0.shape[-1] > REFINE_MIN_SIZE:  # worth a second, better-seeded try before the dense way
+        for k in range(len(out)):
+            if out[k] is None:
+                out[k] = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+    rest = [k for k in range(len(out)) if out[k] is None]
+    if rest:
+        for k, mu in zip(rest, dense_central(a0[rest], a1[rest], a2[rest], ndof, harmonics,
+                                             zero_tol=zero_tol, copy_tol=copy_tol)):
+            out[k] = mu
+    return out

@@ -1,0 +1,214 @@
+"""hbgear.hill: the refined central exponents equal the dense selection, batches equal single
+points, the copy walk and the real-negative-multiplier copies."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from hbgear import hill
+from hbgear import stability as st
+from hbgear.build import build_model
+from hbgear.config import load_config
+from hbgear.hb import HarmonicBalance
+from hbgear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.system import Duffing, GearSystem
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
+
+
+def gear(*overrides):
+    return build_model(load_config(EXAMPLE, list(overrides)))
+
+
+def max_pair_distance(a, b, relative=True):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape, (a, b)
+    d = np.abs(a[:, None] - b[None, :])
+    if relative:
+        d = d / np.abs(b)[None, :]
+    rows, cols = linear_sum_assignment(d)
+    return d[rows, cols].max()
+
+
+def quadratic_at(model, rpm, harmonics=32, samples=256):
+    hb = HarmonicBalance(model.ndof, harmonics, 1, samples)
+    system = GearSystem(model)
+    w = rpm_to_rad_s(rpm)
+    sol = solve_periodic(model, w, harmonics=harmonics, samples=samples)
+    a0, a1, a2, _ = hill.hill_quadratic(hb, sol.z[None], [w], system)
+    zero_tol = st.TRIVIAL_TOL / (2 * np.pi) if system.free_mean_dof is not None else None
+    return a0, a1, a2, zero_tol
+
+
+# ----------------------------------------------------------------------------- refined == dense
+
+CASES = [
+    # soft spring: lightly damped soft mode near 0; 2000 rpm: the seed lands one copy off and walks
+    (("friction.model='NLTV'", "friction.law='arctan'"), 2000.0),
+    (("friction.model='NLTV'", "friction.law='arctan'"), 13400.0),
+    # primary tongue: two real negative multipliers (copies a +- i/2 tie in |centre|)
+    (("friction.model='NLTV'", "friction.law='arctan'"), 26800.0),
+    # reaction boundary: trivial pair dropped; 1000 rpm: two seeds of one family
+    (("friction.model='NLTV'", "friction.law='arctan'", "boundary.output='reaction'"), 1000.0),
+    (("friction.model='NLTV'", "friction.law='arctan'", "boundary.output='reaction'"), 20000.0),
+    (("friction.model='LTV'", "boundary.output='torques'"), 26800.0),
+    (("friction.model='LTV'", "friction.formulation='B'", "boundary.output='torques'"), 7000.0),
+]
+
+
+def test_seed_between_a_split_pair_restarts_on_either_side():
+    """3800 rpm: the low-harmonic sub-problem still sees the mesh mode as a complex pair, the
+    full problem has two real negative multipliers (exponents a1 + i/2, a2 + i/2, a1 - a2 ~ 0.07):
+    the seed's refinement oscillates between them, the batched way leaves the point, and the
+    single-point way restarts on either side of the seed."""
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    a0, a1, a2, _ = quadratic_at(model, 3800.0)
+    dense = hill.dense_central(a0, a1, a2, model.ndof, 32)[0]
+    assert np.sum(np.abs(dense.imag - 0.5) < 1e-5) == 2  # two real negative multipliers
+    assert hill.refined_central_batch(a0, a1, a2, model.ndof, 32)[0] is None
+    refined = hill.refined_central(a0[0], a1[0], a2[0], model.ndof, 32)
+    assert refined is not None
+    assert max_pair_distance(np.exp(2 * np.pi * refined), np.exp(2 * np.pi * dense)) < 1e-8
+
+
+@pytest.mark.parametrize("overrides, rpm", CASES)
+def test_refined_central_exponents_equal_dense_selection(overrides, rpm):
+    model = gear(*overrides)
+    a0, a1, a2, zero_tol = quadratic_at(model, rpm)
+    dense = hill.dense_central(a0, a1, a2, model.ndof, 32, zero_tol=zero_tol)[0]
+    refined = hill.refined_central(a0[0], a1[0], a2[0], model.ndof, 32, zero_tol=zero_tol)
+    assert refined is not None, "refinement not confident: fell back to the dense way"
+    assert max_pair_distance(np.exp(2 * np.pi * refined), np.exp(2 * np.pi * dense)) < 1e-8
+
+
+def test_hill_exponents_methods_agree_and_validate_method():
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    hb = HarmonicBalance(model.ndof, 32, 1, 256)
+    w = rpm_to_rad_s(8000.0)
+    z = solve_periodic(model, w, harmonics=32, samples=256).z
+    system = GearSystem(model)
+    lam_r, mult_r = st.hill_exponents(hb, z, w, system, method="refined")
+    lam_d, mult_d = st.hill_exponents(hb, z, w, system, method="dense")
+    assert max_pair_distance(mult_r, mult_d) < 1e-8
+    assert max_pair_distance(lam_r, lam_d) < 1e-8
+    assert np.all(np.diff(np.abs(mult_r)) <= 0)  # sorted by decreasing modulus
+    with pytest.raises(ValueError, match="method"):
+        st.hill_exponents(hb, z, w, system, method="arnoldi")
+
+
+def test_refined_falls_back_to_dense_when_not_confident(monkeypatch):
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    a0, a1, a2, _ = quadratic_at(model, 13400.0)
+    dense = hill.dense_central(a0, a1, a2, model.ndof, 32)[0]
+    batch = hill.refined_central_batch(a0, a1, a2, model.ndof, 32)[0]
+    assert batch is not None and max_pair_distance(np.exp(2 * np.pi * batch), np.exp(2 * np.pi * dense)) < 1e-8
+    monkeypatch.setattr(hill, "refined_central_batch", lambda a0, *a, **k: [None] * len(a0))
+    monkeypatch.setattr(hill, "refined_central", lambda *a, **k: None)
+    fallback = hill.central_exponents(a0, a1, a2, model.ndof, 32, method="refined")[0]
+    np.testing.assert_array_equal(np.sort_complex(fallback), np.sort_complex(dense))
+
+
+# ----------------------------------------------------------------------------- batches
+
+
+def duffing_points(count=12):
+    from hbgear.continuation import PseudoArclength, continuation
+
+    import jax.numpy as jnp
+
+    hb = HarmonicBalance(1, 7, 1, 64)
+    system = Duffing(0.02, 1.0, 0.1, 0.05)
+    method = PseudoArclength(ds=0.01, ds_max=0.05, parameter_scale=2.0)
+    branch = continuation(lambda z, p: hb.residual_and_jacobians(jnp.asarray(z), p, system),
+                          lambda z, p: hb.residual(jnp.asarray(z), p, system),
+                          np.zeros(hb.size), 0.5, 2.0, method, max_points=400, tolerance=1e-9, progress=False)
+    pick = np.linspace(0, len(branch) - 1, count).astype(int)
+    return hb, system, np.asarray(branch.z)[pick], np.asarray(branch.p)[pick]
+
+
+def test_batched_hill_equals_per_point_on_a_duffing_curve():
+    hb, system, zs, ps = duffing_points(40)  # more than one chunk of 32: the padded last chunk
+    batch = st.hill_exponents_batch(hb, zs, ps, system)
+    assert len(batch) == len(ps)
+    unstable = 0
+    for (lam, mult), z, p in zip(batch, zs, ps):
+        lam1, mult1 = st.hill_exponents(hb, z, p, system)
+        assert max_pair_distance(mult, mult1) < 1e-12
+        assert max_pair_distance(lam, lam1) < 1e-12
+        unstable += not st.is_stable(mult)
+    assert unstable > 0  # the middle branch of the bistable band is on the curve
+    assert st.hill_multipliers_batch(hb, zs[:0], ps[:0], system) == []
+
+
+def test_batched_hill_equals_per_point_on_the_gear():
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    hb = HarmonicBalance(model.ndof, 32, 1, 256)
+    system = GearSystem(model)
+    ws = rpm_to_rad_s(np.array([5000.0, 15000.0]))
+    zs = np.stack([solve_periodic(model, w, harmonics=32, samples=256).z for w in ws])
+    batch = st.hill_multipliers_batch(hb, zs, ws, system)
+    for m, z, w in zip(batch, zs, ws):
+        assert max_pair_distance(m, st.hill_multipliers(hb, z, w, system)) < 1e-12
+
+
+# ----------------------------------------------------------------------------- copies
+
+
+def test_shift_harmonics_moves_the_centre_by_one_per_copy():
+    rng = np.random.default_rng(1)
+    ndof, harmonics = 2, 10
+    v = np.zeros((ndof, 2 * harmonics + 1), dtype=complex)
+    v[:, : 2 * 6 + 1] = rng.normal(size=(ndof, 13)) + 1j * rng.normal(size=(ndof, 13))  # harmonics <= 6
+    v = v.ravel()
+    c0 = hill.harmonic_centre(v[:, None], ndof, harmonics)[0]
+    for k in (1, -1, 3):
+        shifted = hill._shift_harmonics(v, ndof, harmonics, k)
+        assert hill.harmonic_centre(shifted[:, None], ndof, harmonics)[0] == pytest.approx(c0 - k, abs=1e-12)
+        np.testing.assert_allclose(hill._shift_harmonics(shifted, ndof, harmonics, -k), v, atol=1e-14)
+
+
+def test_copy_eigenvector_is_the_shifted_eigenvector():
+    """A dense eigenpair (mu, v) and its copy mu + i: the copy's eigenvector is v shifted."""
+    model = gear("friction.model='LTV'", "boundary.output='torques'")
+    a0, a1, a2, _ = quadratic_at(model, 20000.0)
+    mu, vec = np.linalg.eig(hill._companion(a0, a1, a2))
+    mu, vec = mu[0], vec[0, : a0.shape[-1]]
+    centre = hill.harmonic_centre(vec, model.ndof, 32)
+    i = int(np.argmin(np.abs(centre)))
+    j = int(np.argmin(np.abs(mu - (mu[i] + 1j))))
+    assert abs(mu[j] - (mu[i] + 1j)) < 1e-6
+    shifted = hill._shift_harmonics(vec[:, i], model.ndof, 32, 1)
+    cos = abs(np.vdot(shifted, vec[:, j])) / (np.linalg.norm(shifted) * np.linalg.norm(vec[:, j]))
+    assert cos > 1 - 1e-8
+
+
+def test_real_negative_multiplier_copies_are_one_family():
+    """In a period-doubling tongue the two copies a +- i/2 of one real negative multiplier are
+    conjugates; however far truncation moves their multipliers apart, only one is taken, so
+    both real negative multipliers appear (a low-harmonic Hill used to take one twice)."""
+    m = gear("boundary.output='torques'", "friction.model='LTV'")
+    omega = rpm_to_rad_s(26800.0)
+    exact = st.multipliers_linear(m, omega)
+    assert st.period_doubling(exact) and np.all(np.abs(exact.imag) < 1e-12) and abs(exact[0] - exact[1]) > 0.1
+    for harmonics in (4, 6, 8):  # the copies' multipliers differ by 1e-6 to 1e-5 here
+        hb = HarmonicBalance(m.ndof, harmonics, 1, 4 * harmonics + 4)
+        for method in ("dense", "refined"):
+            hill_mult = st.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m), method=method)
+            assert max_pair_distance(hill_mult, exact, relative=False) < 1e-4, (harmonics, method, hill_mult, exact)
+
+
+def test_nltv_real_negative_multipliers_at_h32_match_the_variational_monodromy():
+    """At 9000 rpm (soft spring, NLTV arctan, H = 32) the copies a +- i/2 of the larger real
+    negative multiplier differ by ~3e-6 (> copy_tol): the selection must still take the smaller
+    real negative multiplier rather than that copy."""
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    w = rpm_to_rad_s(9000.0)
+    sol = solve_periodic(model, w, harmonics=32, samples=256)
+    hb = HarmonicBalance(model.ndof, 32, 1, 256)
+    exact = np.linalg.eigvals(st.monodromy_variational(model, sol, w))
+    assert np.sum((np.abs(exact.imag) < 1e-9) & (exact.real < 0)) == 2
+    for method in ("dense", "refined"):
+        mult = st.hill_multipliers(hb, sol.z, w, GearSystem(model), method=method)
+        assert max_pair_distance(mult, exact, relative=False) < 1e-2, (method, mult, exact)
