@@ -288,21 +288,18 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
     import jax
     import jax.numpy as jnp
 
-    # Under jit every jnp operation is staged, even on constants; evaluating those at trace time
-    # instead lets the callables see concrete values where they do not depend on (z, p) (e.g.
-    # HarmonicBalance's quadrature rule and frozen coefficient blocks come from its caches
-    # instead of being rebuilt inside the compiled step).
+    # The callables are traced in (z, p) only: whatever they close over stays outside the
+    # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
+    # (Evaluating their constant sub-expressions at trace time instead, with
+    # jax.ensure_compile_time_eval, made the compilation ~4x slower for the gear pair.)
     def evaluate(y):
-        with jax.ensure_compile_time_eval():
-            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
+        r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
         jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
                                scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
         return jnp.asarray(r, dtype=float).reshape(size), jac
 
     def residual_of(y):
-        with jax.ensure_compile_time_eval():
-            r = residual(y[:-1], y[-1] * scale)
-        return jnp.asarray(r, dtype=float).reshape(size)
+        return jnp.asarray(residual(y[:-1], y[-1] * scale), dtype=float).reshape(size)
 
     def norm_of(y):
         return jnp.max(jnp.abs(residual_of(y)))
@@ -318,11 +315,56 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
         t = t / jnp.linalg.norm(t)
         return jnp.where(t @ previous >= 0, t, -t), (lu, piv, raw, previous, ok)
 
-    def newton_loop(y_pred, row, target, max_iter, tolerance):
-        def cond(s):
-            return s["status"] < 0
+    def no_factor(previous, xp=jnp):
+        return (xp.zeros((size + 1, size + 1)), xp.zeros(size + 1, np.int32), xp.zeros(size + 1), previous,
+                xp.asarray(False))
 
-        def body(s):
+    @jax.jit
+    def correct(y_pred, row, target, previous, max_iter, tolerance, factor):
+        """Returns ``(y, max|R|, iterations, status, tangent, factor)``; `factor` is the LU
+        ``(lu, piv, v, previous_f, usable)`` of the last converged point, for the chord mode.
+
+        Modes of a loop turn (``mode``): 0 evaluate ``(R, R_z, R_p)`` at the candidate and take
+        it, 1 a full Newton step was tried (taken if it decreases ``max |R|``, else backtracking),
+        2 a backtracking result, 3 a chord step (residual only). Chord: modified Newton with
+        ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``: ``B = A + e d^T``,
+        ``d = row - previous_f``, so ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``,
+        ``v = A^-1 e`` (the unnormalised tangent). Each chord step must halve ``max |R|``; on
+        convergence one mode-0 turn evaluates the Jacobian there (for the tangent), on failure
+        the Newton iteration restarts from the predictor.
+        """
+        lu, piv, v, previous_f, usable = factor
+        d = row - previous_f
+        denominator = 1.0 + d @ v
+
+        def constraint_ok(y):
+            return jnp.abs(row @ y - target) <= 1e-12 * (1 + jnp.abs(target))
+
+        def chord_step(y, r):
+            u = jax.scipy.linalg.lu_solve((lu, piv), -jnp.append(r, row @ y - target))
+            return y + u - v * (d @ u) / denominator
+
+        def chord(s):
+            cand = chord_step(s["y"], s["r"])
+            r = residual_of(cand)
+            norm = jnp.max(jnp.abs(r))
+            it = s["it"] + 1
+            contracted = jnp.isfinite(norm) & (norm <= 0.5 * s["norm"])
+            done = contracted & (norm <= tolerance) & constraint_ok(cand)
+            # linear convergence at the observed rate: the next step will be converged, so take it
+            # and evaluate (R, R_z, R_p) there at once (the Jacobian is needed for the tangent)
+            last = contracted & ~done & (norm * (norm / s["norm"]) <= 0.5 * tolerance) & (it < max_iter)
+            go_on = contracted & ~done & ~last & (it < max_iter)
+            restart = ~done & ~go_on & ~last  # back to the predictor, Newton
+            cand = jnp.where(last, chord_step(cand, r), cand)
+            it = jnp.where(last, it + 1, it)
+            # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
+            return {**s, "it": jnp.where(go_on, it, 0).astype(jnp.int32), "y": jnp.where(restart, s["y"], cand),
+                    "r": r, "norm": jnp.where(restart | last, jnp.inf, norm), "cand": jnp.where(restart, y_pred, cand),
+                    "mode": jnp.where(go_on, 3, 0).astype(jnp.int32),
+                    "chord_it": jnp.where(go_on, 0, it).astype(jnp.int32)}
+
+        def newton(s):
             r_c, jac_c = evaluate(s["cand"])
             norm_c = jnp.max(jnp.abs(r_c))
             decreased = jnp.isfinite(norm_c) & (norm_c < (1 - 1e-4) * s["norm"])
@@ -330,7 +372,7 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
             def take(_):
                 it = s["it"] + jnp.where(s["mode"] == 0, 0, 1)
                 y, residual_y = s["cand"], row @ s["cand"] - target
-                converged = (norm_c <= tolerance) & (jnp.abs(residual_y) <= 1e-12 * (1 + jnp.abs(target)))
+                converged = (norm_c <= tolerance) & constraint_ok(y)
                 status = jnp.where(~jnp.isfinite(norm_c), 1,
                                    jnp.where(converged, 0, jnp.where(it >= max_iter, 3, -1))).astype(jnp.int32)
 
@@ -342,8 +384,8 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
 
                 cand, step, status = jax.lax.cond(status < 0, newton_step,
                                                   lambda _: (y, s["step"], status), None)
-                return dict(it=it.astype(jnp.int32), y=y, jac=jac_c, norm=norm_c, cand=cand, step=step,
-                            mode=jnp.ones_like(s["mode"]), status=status)
+                return {**s, "it": it.astype(jnp.int32), "y": y, "jac": jac_c, "norm": norm_c, "cand": cand,
+                        "step": step, "mode": jnp.ones_like(s["mode"]), "status": status}
 
             def backtrack(_):
                 y, step, norm = s["y"], s["step"], s["norm"]
@@ -363,87 +405,32 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
             return jax.lax.cond((s["mode"] != 1) | decreased, take, backtrack, None)
 
         i32 = jnp.int32
-        init = dict(it=jnp.asarray(0, i32), y=y_pred, jac=jnp.zeros((size, size + 1)), norm=jnp.asarray(jnp.inf),
-                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.asarray(0, i32), status=jnp.asarray(-1, i32))
-        return jax.lax.while_loop(cond, body, init)
+        start_chord = usable & (max_iter > 0)
+        r0 = jax.lax.cond(start_chord, lambda: residual_of(y_pred), lambda: jnp.zeros(size))
+        norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
+        init = dict(it=jnp.asarray(0, i32), y=y_pred, r=r0, jac=jnp.zeros((size, size + 1)), norm=norm0,
+                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, 3, 0).astype(i32),
+                    status=jnp.asarray(-1, i32), chord_it=jnp.asarray(0, i32))
+        s = jax.lax.while_loop(lambda s: s["status"] < 0,
+                               lambda s: jax.lax.cond(s["mode"] == 3, chord, newton, s), init)
+        t, new_factor = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous),
+                                     lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
+        return s["y"], s["norm"], s["it"] + s["chord_it"], s["status"], t, new_factor
 
-    def finish(y, norm, it, status, jac, previous):
-        t, factor = jax.lax.cond(status == 0, lambda: tangent(jac, previous),
-                                 lambda: (jnp.full(size + 1, jnp.nan), (jnp.zeros((size + 1, size + 1)),
-                                          jnp.zeros(size + 1, jnp.int32), jnp.zeros(size + 1), previous,
-                                          jnp.asarray(False))))
-        return y, norm, it, status, t, factor
-
-    @jax.jit
-    def correct(y_pred, row, target, previous, max_iter, tolerance):
-        s = newton_loop(y_pred, row, target, max_iter, tolerance)
-        return finish(s["y"], s["norm"], s["it"], s["status"], s["jac"], previous)
-
-    @jax.jit
-    def chord_correct(y_pred, row, target, previous, max_iter, tolerance, factor):
-        """Modified Newton with the bordered matrix ``B = [J_f; row]`` of the last converged
-        point's LU ``A = [J_f; previous_f]``: ``B = A + e (row - previous_f)^T``, so by
-        Sherman--Morrison ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``, ``v = A^-1 e``
-        (the unnormalised tangent, already computed), ``d = row - previous_f``. One residual per
-        iteration; it must shrink ``max |R|`` by half each time, else the full Newton loop runs
-        from the predictor."""
-        lu, piv, v, previous_f, usable = factor
-        d = row - previous_f
-        denominator = 1.0 + d @ v
-
-        def converged(y, norm):
-            return (norm <= tolerance) & (jnp.abs(row @ y - target) <= 1e-12 * (1 + jnp.abs(target)))
-
-        r0 = residual_of(y_pred)
-        norm0 = jnp.max(jnp.abs(r0))
-
-        def cond(c):
-            return c["status"] < 0
-
-        def body(c):
-            u = jax.scipy.linalg.lu_solve((lu, piv), -jnp.append(c["r"], row @ c["y"] - target))
-            y = c["y"] + u - v * (d @ u) / denominator
-            r = residual_of(y)
-            norm = jnp.max(jnp.abs(r))
-            it = c["it"] + 1
-            contracted = jnp.isfinite(norm) & (norm <= 0.5 * c["norm"])
-            status = jnp.where(contracted & converged(y, norm), 0,
-                               jnp.where(contracted & (it < max_iter), -1, 4)).astype(jnp.int32)
-            return dict(it=it, y=y, r=r, norm=norm, status=status)
-
-        i32 = jnp.int32
-        status0 = jnp.where(converged(y_pred, norm0), 0, jnp.where(usable & jnp.isfinite(norm0) & (max_iter > 0), -1, 4))
-        c = jax.lax.while_loop(cond, body, dict(it=jnp.asarray(0, i32), y=y_pred, r=r0, norm=norm0,
-                                                status=status0.astype(i32)))
-
-        def chord_done(_):
-            _, jac = evaluate(c["y"])
-            return c["y"], c["norm"], c["it"], c["status"], jac
-
-        def newton(_):
-            s = newton_loop(y_pred, row, target, max_iter, tolerance)
-            return s["y"], s["norm"], s["it"], s["status"], s["jac"]
-
-        y, norm, it, status, jac = jax.lax.cond(c["status"] == 0, chord_done, newton, None)
-        return finish(y, norm, it, status, jac, previous)
-
-    return correct, chord_correct
+    return correct, no_factor
 
 
 def _jit_call(compiled, chord):
-    """One run's corrector on the compiled functions; with `chord`, it keeps the LU of the last
+    """One run's corrector on the compiled function; with `chord`, it keeps the LU of the last
     converged point for the next call."""
     import jax
 
-    correct, chord_correct = compiled
+    correct, no_factor = compiled
     last = [None]
 
     def call(y_pred, row, target, previous, max_iter, tolerance):
-        args = (y_pred, row, float(target), previous, int(max_iter), float(tolerance))
-        if chord and last[0] is not None:
-            out = chord_correct(*args, last[0])
-        else:
-            out = correct(*args)
+        factor = last[0] if chord and last[0] is not None else no_factor(np.asarray(previous, dtype=float), np)
+        out = correct(y_pred, row, float(target), previous, int(max_iter), float(tolerance), factor)
         y, norm, it, status, t = jax.device_get(out[:5])
         status, norm = int(status), float(norm)
         if status == 0:

@@ -129,8 +129,9 @@ class HarmonicBalance:
         if key not in _FROZEN_CACHE:
             if len(_FROZEN_CACHE) > 64:
                 _FROZEN_CACHE.clear()
-            blocks = self._blocks_jit(system, p, quad + (None,))
-            _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
+            with jax.ensure_compile_time_eval():  # concrete even when first asked for under a trace
+                blocks = self._blocks_jit(system, p, quad + (None,))
+                _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
         return _FROZEN_CACHE[key]
 
     def _forcing_pieces(self, system, quad):
