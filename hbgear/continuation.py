@@ -427,9 +427,15 @@ def _jit_call(compiled, chord):
 
     correct, no_factor = compiled
     last = [None]
+    empty = None
 
     def call(y_pred, row, target, previous, max_iter, tolerance):
-        factor = last[0] if chord and last[0] is not None else no_factor(np.asarray(previous, dtype=float), np)
+        nonlocal empty
+        if chord and last[0] is not None:
+            factor = last[0]
+        else:  # "no factorisation": device-resident zeros made once, only `previous` changes
+            empty = no_factor(jax.numpy.asarray(previous, dtype=float)) if empty is None else empty
+            factor = empty[:3] + (np.asarray(previous, dtype=float), empty[4])
         out = correct(y_pred, row, float(target), previous, int(max_iter), float(tolerance), factor)
         y, norm, it, status, t = jax.device_get(out[:5])
         status, norm = int(status), float(norm)
