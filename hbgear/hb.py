@@ -342,6 +342,16 @@ class HarmonicBalance:
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (2, n, n, B, B)
         return self._flatten(blocks[0]), self._flatten(blocks[1]), jnp.kron(jnp.eye(n), d)
 
+    def _times_derivative(self, a, system, p):
+        """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times
+        column ``b_k``, column ``b_k`` becomes ``k w`` times column ``a_k``, column ``a_0`` zero."""
+        d = fourier.derivative_matrix(self.harmonics, 1.0)  # numpy: static structure
+        source = np.argmax(np.abs(d), axis=0)  # the one nonzero row of each column of D
+        factor = d[source, np.arange(self.block)]
+        source = (np.arange(self.ndof)[:, None] * self.block + source[None]).ravel()
+        factor = np.tile(factor, self.ndof) * self.base_frequency(system, p)
+        return a[:, source] * factor
+
     def _toeplitz_ok(self, system) -> bool:
         """The sampled-derivative Jacobian is exact when ``N > 4H``."""
         return system.is_linear or self.samples > 4 * self.harmonics
@@ -353,8 +363,8 @@ class HarmonicBalance:
         jac = operator[0]
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v, d = self._nonlinear_jacobian(x, extra, p, system)
-            jac = jac - t_q - t_v @ d
+            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+            jac = jac - t_q - self._times_derivative(t_v, system, p)
         jac = jac * (system.displacement_scale / system.force_scale)
         k = system.free_mean_dof
         if k is not None:
@@ -386,8 +396,8 @@ class HarmonicBalance:
             if system.is_linear:
                 jz, jv = lin / fs, c_conv / fs
             else:
-                t_q, t_v, d_big = self._nonlinear_jacobian(x, extra, p, system)
-                jz, jv = (lin - t_q - t_v @ d_big) / fs, (c_conv - t_v) / fs
+                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+                jz, jv = (lin - t_q - self._times_derivative(t_v, system, p)) / fs, (c_conv - t_v) / fs
         else:
 
             def response(xx, shift):
