@@ -151,24 +151,28 @@ class HarmonicBalance:
         """
         if not getattr(system, "forcing_affine_in_frequency", False):
             return None
-        p_a, p_b, p_c = 1.0, 3.0, 2.0
-        w_a, w_b, w_c = (float(system.excitation_frequency(p)) for p in (p_a, p_b, p_c))
-        if not (w_a != w_b and np.isfinite(w_a) and np.isfinite(w_b)):
-            return None
-        s_star = quad[0][:1]
-        f_hat, f_pt = zip(*(self._forcing_and_point_jit(system, p, quad, s_star) for p in (p_a, p_b, p_c)))
-        d_hat, d_pt = (f_hat[1] - f_hat[0]) / (w_b - w_a), (f_pt[1] - f_pt[0]) / (w_b - w_a)
-        pieces = (f_hat[0], d_hat, w_a, f_pt[0], d_pt, s_star)
-        check = self._combined_forcing(system, p_c, pieces)
-        if not float(jnp.max(jnp.abs(check - f_hat[2]))) <= 1e-11 * (float(jnp.max(jnp.abs(f_hat[2]))) + 1e-300):
+        pieces, error, scale = self._forcing_pieces_jit(system, quad)
+        if not (np.isfinite(float(error)) and float(error) <= 1e-11 * float(scale)):
             return None  # the declared structure does not hold: full quadrature every call
         return pieces
 
     @partial(jax.jit, static_argnums=0)
-    def _forcing_and_point_jit(self, system, p, quad, s_star):
-        forcing, _, _ = self._periodic_coefficients(system, p, quad[:3] + (False,))
-        return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size), self._point_forcing(
-            system, p, s_star)
+    def _forcing_pieces_jit(self, system, quad):
+        """The pieces from ``p_a = 1``, ``p_b = 3``, checked against the quadrature at ``p_c = 2``
+        (one compiled call: op-by-op evaluation would compile every operation on its own)."""
+        quad = quad[:3] + (False,)  # forcing probe only
+        s_star = quad[0][:1]
+
+        def at(p):
+            forcing, _, _ = self._periodic_coefficients(system, p, quad)
+            real = fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
+            return real, self._point_forcing(system, p, s_star), system.excitation_frequency(p)
+
+        f, pt, w = jax.vmap(at)(jnp.array([1.0, 3.0, 2.0]))  # traced once
+        (f_a, f_b, f_c), (pt_a, pt_b, _), (w_a, w_b, _) = f, pt, w
+        pieces = (f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
+        error = jnp.max(jnp.abs(self._combined_forcing(system, 2.0, pieces) - f_c))
+        return pieces, error, jnp.max(jnp.abs(f_c)) + 1e-300
 
     def _point_forcing(self, system, p, s_star):
         zero = jnp.zeros((self.ndof, 1))
