@@ -6,7 +6,10 @@ Part 1 -- **breakdown** of :func:`hbgear.continuation.continuation` on the NLTV 
 ``time.perf_counter`` (including ``block_until_ready`` and the copy to numpy), and, for the
 duration of the run only, ``scipy.linalg.lu_factor``/``lu_solve``/``solve`` are wrapped the
 same way. Python overhead = wall time - evaluations - linear algebra. The floor is one dense LU
-(+ solve) of the bordered Jacobian, size ``ndof (2H+1) + 1``, per corrector step.
+(+ solve) of the bordered Jacobian, size ``ndof (2H+1) + 1``, per corrector step of this (Newton)
+run. The same range is then run with the compiled correctors (``jit_step=True``, Newton and
+``chord=True``; median of 2 after a compiling run) and their time per point is set against the
+same floor per point.
 
 Part 2 -- **pieces** of one evaluation (median of repeated calls after compilation):
 residual, ``(R, J)``, ``(R, J, dR/dp)``, the linear operator alone, the AFT part alone.
@@ -28,6 +31,7 @@ Run: ``python benchmarks/bench_newton_breakdown.py [--quick]``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import sys
 import time
@@ -37,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # measure this checkout, not an installed hbgear
 CONFIG = ROOT / "examples" / "paper_table1.toml"
 OVERRIDES = ["friction.model=NLTV", "friction.law=arctan"]
 H, SAMPLES, TOL = 32, 256, 1e-9
@@ -125,8 +130,19 @@ def breakdown(model, hb, system, rpm0, rpm1):
     lu_ms = median_ms(lambda: scipy.linalg.lu_solve(scipy.linalg.lu_factor(a_mat, check_finite=False), a_mat[0],
                                                     check_finite=False), 300)
     steps = timer.calls.get("linalg.lu_factor", 0)
+    compiled = {}
+    for label, chord in (("compiled Newton", False), ("compiled chord", True)):
+        method = dataclasses.replace(frc_method(w0, w1), jit_step=True, chord=chord)
+        times = []
+        for _ in range(3):  # the first run compiles the corrector
+            a = time.perf_counter()
+            run = continuation(rjp, res, start.z, w0, w1, method, max_points=6000, tolerance=TOL, progress=False)
+            times.append(time.perf_counter() - a)
+        compiled[label] = {"wall": statistics.median(times[1:]), "points": len(run),
+                           "iterations": int(np.sum(run.iterations)), "rejected": run.rejected}
     return {"wall": wall, "points": len(branch), "timer": timer, "lu_ms": lu_ms, "steps": steps,
-            "iterations": int(np.sum(branch.iterations)), "rejected": branch.rejected, "size": size}
+            "iterations": int(np.sum(branch.iterations)), "rejected": branch.rejected, "size": size,
+            "compiled": compiled}
 
 
 # ----------------------------------------------------------------------------- parts 2 and 3
@@ -147,8 +163,17 @@ def prototypes(model, hb, system):
     out["residual"] = median_ms(lambda: hb.residual(z, w, system))
     out["(R, J)"] = median_ms(lambda: hb.residual_and_jacobian(z, w, system))
     out["(R, J, dR/dp)"] = median_ms(lambda: hb.residual_and_jacobians(z, w, system))
+    prepared = hb.quadrature(system)  # with the speed-independent pieces (what hbgear uses)
+    response_jit = jax.jit(lambda x, p, s: hb._linear_response(x, p, s, prepared))
+    out["L x - F from the frozen pieces (hbgear now)"] = median_ms(lambda: response_jit(z * xs, w, system))
+    forcing_jit = jax.jit(lambda p, s: hb._forcing(s, p, prepared))
+    out["  of which the forcing from its pieces"] = median_ms(lambda: forcing_jit(w, system))
+    windup_jit = jax.jit(lambda p, s: s.model.static_state(p, jnp)[1])
+    out["    of which the spring wind-up u_s(w)"] = median_ms(lambda: windup_jit(w, system))
+    nl_jacobian_jit = jax.jit(lambda x, p, s: hb._nonlinear_jacobian(x, 0.0, p, s)[:2])
+    out["AFT Jacobian blocks (sampled derivatives)"] = median_ms(lambda: nl_jacobian_jit(z * xs, w, system))
     op_jit = jax.jit(lambda p, s: hb.linear_operator(s, p, quad))
-    out["linear operator alone"] = median_ms(lambda: op_jit(w, system))
+    out["linear operator, full construction (before)"] = median_ms(lambda: op_jit(w, system))
     coeff_jit = jax.jit(lambda p, s: hb._periodic_coefficients(s, p, quad))
     out["  of which periodic coefficients (quadrature)"] = median_ms(lambda: coeff_jit(w, system))
     nl_jit = jax.jit(lambda x, p, s: hb._nonlinear(x, hb._velocity(x, s, p), 0.0, p, s))
@@ -264,6 +289,14 @@ def table(b, protos):
         f"{'total':40s} {b['wall']:9.2f} {1e3 * b['wall'] / pts:14.2f}",
         f"floor: one LU+solve of {b['size']}x{b['size']} = {b['lu_ms']:.3f} ms x {b['steps'] / pts:.2f} steps per point "
         f"= {1e3 * floor / pts:.2f} ms per point; total / floor = {b['wall'] / floor:.0f}x (goal <= 3x)",
+    ]
+    floor_per_point = floor / pts
+    for label, c in b.get("compiled", {}).items():
+        per_point = c["wall"] / c["points"]
+        lines.append(f"{label + ' corrector (jit_step)':40s} {c['wall']:9.2f} {1e3 * per_point:14.2f}   "
+                     f"{c['points']} points, {c['iterations'] / c['points']:.2f} iterations per point, "
+                     f"{c['rejected']} rejected; per point / floor = {per_point / floor_per_point:.1f}x")
+    lines += [
         "",
         f"{'one evaluation at 13000 rpm (median)':52s} {'ms':>8s}",
     ]

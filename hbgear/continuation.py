@@ -97,6 +97,14 @@ class PseudoArclength:
       a warning. Same algorithm, same points to rounding (LU by XLA instead of scipy); it
       removes the per-evaluation dispatch and conversion overhead, which dominates small and
       mid-size problems. Costs one compilation per run (~1-3 s).
+    - `chord`: with `jit_step`, a modified (chord) Newton corrector: the iterations reuse the LU
+      of the bordered Jacobian factored for the tangent at the last converged point (one
+      residual evaluation and two triangular solves per iteration, no Jacobian), and the
+      Jacobian is evaluated once per point, at the converged point, for its tangent. If the
+      chord iteration does not halve ``max |R|`` at every step, the full Newton corrector runs
+      from the predictor. Same acceptance test (``max |R| <= tolerance``), so the points agree
+      with the Newton corrector's to the tolerance; the iteration counts (and so the step
+      sizes) differ. Without `jit_step` it has no effect.
     """
 
     ds: float = 1e-2
@@ -109,6 +117,7 @@ class PseudoArclength:
     growth: float = 2.0
     max_parameter_step: float | None = None
     jit_step: bool = False
+    chord: bool = False
 
     def __post_init__(self):
         if not (0 < self.ds_min <= self.ds <= self.ds_max and math.isfinite(self.ds_max)):
@@ -279,35 +288,83 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
     import jax
     import jax.numpy as jnp
 
-    # Under jit every jnp operation is staged, even on constants; evaluating those at trace time
-    # instead lets the callables see concrete values where they do not depend on (z, p) (e.g.
-    # HarmonicBalance's quadrature rule and frozen coefficient blocks come from its caches
-    # instead of being rebuilt inside the compiled step).
+    # The callables are traced in (z, p) only: whatever they close over stays outside the
+    # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
+    # (Evaluating their constant sub-expressions at trace time instead, with
+    # jax.ensure_compile_time_eval, made the compilation ~4x slower for the gear pair.)
     def evaluate(y):
-        with jax.ensure_compile_time_eval():
-            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
+        r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
         jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
                                scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
         return jnp.asarray(r, dtype=float).reshape(size), jac
 
+    def residual_of(y):
+        return jnp.asarray(residual(y[:-1], y[-1] * scale), dtype=float).reshape(size)
+
     def norm_of(y):
-        with jax.ensure_compile_time_eval():
-            r = residual(y[:-1], y[-1] * scale)
-        return jnp.max(jnp.abs(jnp.asarray(r, dtype=float)))
+        return jnp.max(jnp.abs(residual_of(y)))
+
+    unit_last = jnp.zeros(size + 1).at[-1].set(1.0)
 
     def tangent(jac, previous):
-        a = jnp.concatenate([jac, previous[None]], axis=0)
-        t = jnp.linalg.solve(a, jnp.zeros(size + 1).at[-1].set(1.0))
-        t = jax.lax.cond(jnp.all(jnp.isfinite(t)), lambda: t, lambda: jnp.linalg.svd(jac)[2][-1])
+        """Unit tangent from ``[J; previous] t = e``, and that LU (``ok`` = it is usable)."""
+        lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([jac, previous[None]], axis=0))
+        raw = jax.scipy.linalg.lu_solve((lu, piv), unit_last)
+        ok = jnp.all(jnp.isfinite(raw))
+        t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(jac)[2][-1])
         t = t / jnp.linalg.norm(t)
-        return jnp.where(t @ previous >= 0, t, -t)
+        return jnp.where(t @ previous >= 0, t, -t), (lu, piv, raw, previous, ok)
+
+    def no_factor(previous, xp=jnp):
+        return (xp.zeros((size + 1, size + 1)), xp.zeros(size + 1, np.int32), xp.zeros(size + 1), previous,
+                xp.asarray(False))
 
     @jax.jit
-    def correct(y_pred, row, target, previous, max_iter, tolerance):
-        def cond(s):
-            return s["status"] < 0
+    def correct(y_pred, row, target, previous, max_iter, tolerance, factor):
+        """Returns ``(y, max|R|, iterations, status, tangent, factor)``; `factor` is the LU
+        ``(lu, piv, v, previous_f, usable)`` of the last converged point, for the chord mode.
 
-        def body(s):
+        Modes of a loop turn (``mode``): 0 evaluate ``(R, R_z, R_p)`` at the candidate and take
+        it, 1 a full Newton step was tried (taken if it decreases ``max |R|``, else backtracking),
+        2 a backtracking result, 3 a chord step (residual only). Chord: modified Newton with
+        ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``: ``B = A + e d^T``,
+        ``d = row - previous_f``, so ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``,
+        ``v = A^-1 e`` (the unnormalised tangent). Each chord step must halve ``max |R|``; on
+        convergence one mode-0 turn evaluates the Jacobian there (for the tangent), on failure
+        the Newton iteration restarts from the predictor.
+        """
+        lu, piv, v, previous_f, usable = factor
+        d = row - previous_f
+        denominator = 1.0 + d @ v
+
+        def constraint_ok(y):
+            return jnp.abs(row @ y - target) <= 1e-12 * (1 + jnp.abs(target))
+
+        def chord_step(y, r):
+            u = jax.scipy.linalg.lu_solve((lu, piv), -jnp.append(r, row @ y - target))
+            return y + u - v * (d @ u) / denominator
+
+        def chord(s):
+            cand = chord_step(s["y"], s["r"])
+            r = residual_of(cand)
+            norm = jnp.max(jnp.abs(r))
+            it = s["it"] + 1
+            contracted = jnp.isfinite(norm) & (norm <= 0.5 * s["norm"])
+            done = contracted & (norm <= tolerance) & constraint_ok(cand)
+            # linear convergence at the observed rate: the next step will be converged, so take it
+            # and evaluate (R, R_z, R_p) there at once (the Jacobian is needed for the tangent)
+            last = contracted & ~done & (norm * (norm / s["norm"]) <= 0.5 * tolerance) & (it < max_iter)
+            go_on = contracted & ~done & ~last & (it < max_iter)
+            restart = ~done & ~go_on & ~last  # back to the predictor, Newton
+            cand = jnp.where(last, chord_step(cand, r), cand)
+            it = jnp.where(last, it + 1, it)
+            # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
+            return {**s, "it": jnp.where(go_on, it, 0).astype(jnp.int32), "y": jnp.where(restart, s["y"], cand),
+                    "r": r, "norm": jnp.where(restart | last, jnp.inf, norm), "cand": jnp.where(restart, y_pred, cand),
+                    "mode": jnp.where(go_on, 3, 0).astype(jnp.int32),
+                    "chord_it": jnp.where(go_on, 0, it).astype(jnp.int32)}
+
+        def newton(s):
             r_c, jac_c = evaluate(s["cand"])
             norm_c = jnp.max(jnp.abs(r_c))
             decreased = jnp.isfinite(norm_c) & (norm_c < (1 - 1e-4) * s["norm"])
@@ -315,7 +372,7 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
             def take(_):
                 it = s["it"] + jnp.where(s["mode"] == 0, 0, 1)
                 y, residual_y = s["cand"], row @ s["cand"] - target
-                converged = (norm_c <= tolerance) & (jnp.abs(residual_y) <= 1e-12 * (1 + jnp.abs(target)))
+                converged = (norm_c <= tolerance) & constraint_ok(y)
                 status = jnp.where(~jnp.isfinite(norm_c), 1,
                                    jnp.where(converged, 0, jnp.where(it >= max_iter, 3, -1))).astype(jnp.int32)
 
@@ -327,8 +384,8 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
 
                 cand, step, status = jax.lax.cond(status < 0, newton_step,
                                                   lambda _: (y, s["step"], status), None)
-                return dict(it=it.astype(jnp.int32), y=y, jac=jac_c, norm=norm_c, cand=cand, step=step,
-                            mode=jnp.ones_like(s["mode"]), status=status)
+                return {**s, "it": it.astype(jnp.int32), "y": y, "jac": jac_c, "norm": norm_c, "cand": cand,
+                        "step": step, "mode": jnp.ones_like(s["mode"]), "status": status}
 
             def backtrack(_):
                 y, step, norm = s["y"], s["step"], s["norm"]
@@ -348,17 +405,42 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
             return jax.lax.cond((s["mode"] != 1) | decreased, take, backtrack, None)
 
         i32 = jnp.int32
-        init = dict(it=jnp.asarray(0, i32), y=y_pred, jac=jnp.zeros((size, size + 1)), norm=jnp.asarray(jnp.inf),
-                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.asarray(0, i32), status=jnp.asarray(-1, i32))
-        s = jax.lax.while_loop(cond, body, init)
-        t = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous), lambda: jnp.full(size + 1, jnp.nan))
-        return s["y"], s["norm"], s["it"], s["status"], t
+        start_chord = usable & (max_iter > 0)
+        r0 = jax.lax.cond(start_chord, lambda: residual_of(y_pred), lambda: jnp.zeros(size))
+        norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
+        init = dict(it=jnp.asarray(0, i32), y=y_pred, r=r0, jac=jnp.zeros((size, size + 1)), norm=norm0,
+                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, 3, 0).astype(i32),
+                    status=jnp.asarray(-1, i32), chord_it=jnp.asarray(0, i32))
+        s = jax.lax.while_loop(lambda s: s["status"] < 0,
+                               lambda s: jax.lax.cond(s["mode"] == 3, chord, newton, s), init)
+        t, new_factor = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous),
+                                     lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
+        return s["y"], s["norm"], s["it"] + s["chord_it"], s["status"], t, new_factor
+
+    return correct, no_factor
+
+
+def _jit_call(compiled, chord):
+    """One run's corrector on the compiled function; with `chord`, it keeps the LU of the last
+    converged point for the next call."""
+    import jax
+
+    correct, no_factor = compiled
+    last = [None]
+    empty = None
 
     def call(y_pred, row, target, previous, max_iter, tolerance):
-        y, norm, it, status, t = jax.device_get(correct(y_pred, row, float(target), previous, int(max_iter),
-                                                        float(tolerance)))
+        nonlocal empty
+        if chord and last[0] is not None:
+            factor = last[0]
+        else:  # "no factorisation": device-resident zeros made once, only `previous` changes
+            empty = no_factor(jax.numpy.asarray(previous, dtype=float)) if empty is None else empty
+            factor = empty[:3] + (np.asarray(previous, dtype=float), empty[4])
+        out = correct(y_pred, row, float(target), previous, int(max_iter), float(tolerance), factor)
+        y, norm, it, status, t = jax.device_get(out[:5])
         status, norm = int(status), float(norm)
         if status == 0:
+            last[0] = out[5]
             return _Point(np.array(y), norm, np.array(t), int(it))
         if status == 3:
             return _Failure(f"not converged in {max_iter} corrector iterations", norm, int(max_iter))
@@ -424,7 +506,7 @@ def continuation(
             if len(_JIT_CACHE) >= 8:
                 _JIT_CACHE.pop(next(iter(_JIT_CACHE)))
             _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, scale, size)
-        corrector[0] = _JIT_CACHE[key]
+        corrector[0] = _jit_call(_JIT_CACHE[key], m.chord)
 
     def correct(y_pred, row, target, max_iter, previous, tol=tolerance):
         """Newton on ``R(y) = 0``, ``row . y = target``; a _Point (with the tangent oriented

@@ -44,19 +44,38 @@ def derivative_matrix(harmonics: int, omega, xp=np):
 
 
 @lru_cache(maxsize=64)
-def _convolution_index(harmonics: int):
-    """Static index tables for :func:`convolution_matrix`."""
+def _convolution_gather(harmonics: int):
+    """Static gather tables for :func:`convolution_matrix`: entry ``(k, l)`` of the real matrix is
+    ``sum_j factor[j, k, l] * v[index[j, k, l]]`` with ``v = [Re p_0 .. Re p_2H, Im p_0 .. Im p_2H]``."""
     size = basis_size(harmonics)
+    orders = 2 * harmonics + 1
     k = np.zeros(size, dtype=int)
     kind = np.zeros(size, dtype=int)  # 0: constant, 1: cosine, 2: sine
-    k[1::2] = np.arange(1, harmonics + 1)
-    k[2::2] = np.arange(1, harmonics + 1)
-    kind[1::2] = 1
-    kind[2::2] = 2
+    k[1::2] = k[2::2] = np.arange(1, harmonics + 1)
+    kind[1::2], kind[2::2] = 1, 2
     row_k, col_k = np.meshgrid(k, k, indexing="ij")
     row_kind, col_kind = np.meshgrid(kind, kind, indexing="ij")
-    diff = row_k - col_k
-    return row_k, col_k, row_kind, col_kind, np.abs(diff), np.sign(diff), row_k + col_k
+    adiff, sdiff, ksum = np.abs(row_k - col_k), np.sign(row_k - col_k), row_k + col_k
+    re_d, im_d, re_s, im_s = adiff, orders + adiff, ksum, orders + ksum
+    index = np.zeros((2, size, size), dtype=int)
+    factor = np.zeros((2, size, size))
+
+    def put(mask, i0, f0, i1=None, f1=0.0):
+        index[0][mask], factor[0][mask] = np.broadcast_to(i0, mask.shape)[mask], np.broadcast_to(f0, mask.shape)[mask]
+        if i1 is not None:
+            index[1][mask], factor[1][mask] = np.broadcast_to(i1, mask.shape)[mask], np.broadcast_to(f1, mask.shape)[mask]
+
+    # p_{k-l} = conj p_{l-k}: Im p_{k-l} = sign(k-l) Im p_|k-l|; p_{k+l}
+    put((row_kind == 1) & (col_kind == 1), re_d, 1.0, re_s, 1.0)  # cos-cos: Re p_{k-l} + Re p_{k+l}
+    put((row_kind == 1) & (col_kind == 2), im_d, sdiff, im_s, -1.0)  # cos-sin: Im p_{k-l} - Im p_{k+l}
+    put((row_kind == 2) & (col_kind == 1), im_d, -sdiff, im_s, -1.0)  # sin-cos: -(Im p_{k-l} + Im p_{k+l})
+    put((row_kind == 2) & (col_kind == 2), re_d, 1.0, re_s, -1.0)  # sin-sin: Re p_{k-l} - Re p_{k+l}
+    put((row_kind == 0) & (col_kind == 1), col_k, 1.0)  # row a_0: Re p_l, -Im p_l
+    put((row_kind == 0) & (col_kind == 2), orders + col_k, -1.0)
+    put((row_kind == 1) & (col_kind == 0), row_k, 2.0)  # column a_0: 2 Re p_k, -2 Im p_k
+    put((row_kind == 2) & (col_kind == 0), orders + row_k, -2.0)
+    put((row_kind == 0) & (col_kind == 0), 0, 1.0)  # Re p_0
+    return index, factor
 
 
 def convolution_matrix(p, harmonics: int, xp=np):
@@ -65,31 +84,15 @@ def convolution_matrix(p, harmonics: int, xp=np):
     **Arguments:** `p`: complex coefficients ``p_m``, ``m = 0 .. 2H`` on the base frequency
     (shape ``(..., 2H+1)``, leading axes batched).
 
-    **Returns:** shape ``(..., 2H+1, 2H+1)``, ``T`` with ``coeffs(p x) = T @ coeffs(x)``.
+    **Returns:** shape ``(..., 2H+1, 2H+1)``, ``T`` with ``coeffs(p x) = T @ coeffs(x)``: with
+    ``p_{-m} = conj p_m``, cos-cos ``Re p_{k-l} + Re p_{k+l}``, cos-sin ``Im p_{k-l} - Im p_{k+l}``,
+    sin-cos ``-(Im p_{k-l} + Im p_{k+l})``, sin-sin ``Re p_{k-l} - Re p_{k+l}``, row ``a_0``
+    ``(Re p_0, Re p_l, -Im p_l)``, column ``a_0`` ``(2 Re p_k, -2 Im p_k)``; two gathers.
     """
-    row_k, col_k, row_kind, col_kind, adiff, sdiff, ksum = _convolution_index(harmonics)
+    index, factor = _convolution_gather(harmonics)
     p = xp.asarray(p)
-    re, im = xp.real(p), xp.imag(p)
-    re_d, im_d = re[..., adiff], im[..., adiff] * sdiff  # p_{k-l}, using p_{-m} = conj p_m
-    re_s, im_s = re[..., ksum], im[..., ksum]  # p_{k+l}
-    zero = 0.0 * re_d
-    # column a_0 / row a_0 handled by the general formulas with the right factors below
-    t_cc = re_d + re_s
-    t_cs = im_d - im_s
-    t_sc = -(im_d + im_s)
-    t_ss = re_d - re_s
-    out = xp.where((row_kind == 1) & (col_kind == 1), t_cc, zero)
-    out = xp.where((row_kind == 1) & (col_kind == 2), t_cs, out)
-    out = xp.where((row_kind == 2) & (col_kind == 1), t_sc, out)
-    out = xp.where((row_kind == 2) & (col_kind == 2), t_ss, out)
-    # row a_0: Re p_l (cos columns), -Im p_l (sin columns), Re p_0 at (0, 0)
-    out = xp.where((row_kind == 0) & (col_kind == 1), re[..., col_k], out)
-    out = xp.where((row_kind == 0) & (col_kind == 2), -im[..., col_k], out)
-    # column a_0: 2 Re p_k (cos rows), -2 Im p_k (sin rows)
-    out = xp.where((row_kind == 1) & (col_kind == 0), 2 * re[..., row_k], out)
-    out = xp.where((row_kind == 2) & (col_kind == 0), -2 * im[..., row_k], out)
-    out = xp.where((row_kind == 0) & (col_kind == 0), re[..., :1][..., None] + 0.0 * out, out)
-    return out
+    v = xp.concatenate([xp.real(p), xp.imag(p)], axis=-1)
+    return v[..., index[0]] * factor[0] + v[..., index[1]] * factor[1]
 
 
 def coefficients_to_real(f, harmonics: int, xp=np):

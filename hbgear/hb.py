@@ -108,11 +108,19 @@ class HarmonicBalance:
         return quad + (self._frozen_blocks(system, p, quad),)
 
     def _frozen_blocks(self, system, p, quad):
-        """``(K_conv, C_conv)`` blocks when the system declares them independent of ``p``.
+        """The speed-independent pieces of the linear operator, when the system declares them so.
 
-        For a speed sweep of the gear pair the periodic stiffness and damping coefficients do
-        not depend on the speed (only the forcing and ``D(w)`` do), so they are built once per
-        system and reused: the residual then costs a fraction of the full construction.
+        For a speed sweep of the gear pair ``M`` and the periodic stiffness and damping
+        coefficients do not depend on the speed (only the forcing and ``D(w) = w D_1`` do), so
+
+            L(w) = M (x) D^2 + K_conv + C_conv (I (x) D) = A_0 + w A_1 + w^2 A_2,
+            A_0 = K_conv,  A_1 = C_conv (I (x) D_1),  A_2 = M (x) D_1^2,
+
+        are built once per system and each evaluation combines three matrices (or applies them
+        to ``x``) instead of rebuilding ``L``.
+
+        **Returns:** ``None`` or ``(A_0, A_1, A_2, C_conv, forcing)``, the matrices flattened
+        ``(size, size)`` in SI, ``forcing`` the pieces of :meth:`_forcing_pieces` or ``None``.
         """
         if not getattr(system, "coefficients_independent_of_parameter", False):
             return None
@@ -121,15 +129,71 @@ class HarmonicBalance:
         if key not in _FROZEN_CACHE:
             if len(_FROZEN_CACHE) > 64:
                 _FROZEN_CACHE.clear()
-            _FROZEN_CACHE[key] = self._blocks_jit(system, p, quad + (None,))
+            with jax.ensure_compile_time_eval():  # concrete even when first asked for under a trace
+                blocks = self._blocks_jit(system, p, quad + (None,))
+                _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
         return _FROZEN_CACHE[key]
+
+    def _forcing_pieces(self, system, quad):
+        r"""Pieces of the forcing vector when it is affine in the excitation frequency up to a
+        constant (in ``s``) term, ``F(s; p) = Fbar(p) + A(s) + w_exc(p) B(s)`` (the system says
+        so with ``forcing_affine_in_frequency``; checked here at a third parameter value).
+
+        Then, from full quadratures at ``p_a``, ``p_b`` and point values ``f = F(s_*; .)`` at one
+        node ``s_*``, with ``lam = (w - w_a) / (w_b - w_a)``:
+
+            F_hat(p) = F_hat_a + lam (F_hat_b - F_hat_a) + e_mean (F(s_*; p) - f_a - lam (f_b - f_a))
+
+        exactly: the harmonics are affine in ``w``, and the point value gives ``Fbar(p)``. A call
+        then evaluates ``F`` at one node instead of at every quadrature node.
+
+        **Returns:** ``None`` or ``(F_hat_a, dF_hat/dw, w_a, f_a, df/dw, s_*)``.
+        """
+        if not getattr(system, "forcing_affine_in_frequency", False):
+            return None
+        pieces, error, scale = self._forcing_pieces_jit(system, quad)
+        if not (np.isfinite(float(error)) and float(error) <= 1e-11 * float(scale)):
+            return None  # the declared structure does not hold: full quadrature every call
+        return pieces
+
+    @partial(jax.jit, static_argnums=0)
+    def _forcing_pieces_jit(self, system, quad):
+        """The pieces from ``p_a = 1``, ``p_b = 3``, checked against the quadrature at ``p_c = 2``
+        (one compiled call: op-by-op evaluation would compile every operation on its own)."""
+        quad = quad[:3] + (False,)  # forcing probe only
+        s_star = quad[0][:1]
+
+        def at(p):
+            forcing, _, _ = self._periodic_coefficients(system, p, quad)
+            real = fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
+            return real, self._point_forcing(system, p, s_star), system.excitation_frequency(p)
+
+        f, pt, w = jax.vmap(at)(jnp.array([1.0, 3.0, 2.0]))  # traced once
+        (f_a, f_b, f_c), (pt_a, pt_b, _), (w_a, w_b, _) = f, pt, w
+        pieces = (f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
+        error = jnp.max(jnp.abs(self._combined_forcing(system, 2.0, pieces) - f_c))
+        return pieces, error, jnp.max(jnp.abs(f_c)) + 1e-300
+
+    def _point_forcing(self, system, p, s_star):
+        zero = jnp.zeros((self.ndof, 1))
+        return system.force(s_star, zero, zero, p, "linear", 0.0, jnp)[:, 0]
+
+    def _combined_forcing(self, system, p, pieces):
+        f_a, d_hat, w_a, pt_a, d_pt, s_star = pieces
+        dw = system.excitation_frequency(p) - w_a
+        mean_fix = self._point_forcing(system, p, s_star) - pt_a - dw * d_pt  # (ndof,)
+        return (f_a + dw * d_hat).at[:: self.block].add(mean_fix)
 
     @partial(jax.jit, static_argnums=0)
     def _blocks_jit(self, system, p, quad):
+        H = self.harmonics
         _, stiffness, damping = self._periodic_coefficients(system, p, quad)
-        return fourier.convolution_matrix(stiffness, self.harmonics, jnp), fourier.convolution_matrix(
-            damping, self.harmonics, jnp
-        )
+        k_conv = fourier.convolution_matrix(stiffness, H, jnp)
+        c_conv = fourier.convolution_matrix(damping, H, jnp)
+        d1 = fourier.derivative_matrix(H, 1.0, jnp)
+        mass = system.mass_matrix(p, jnp)
+        a2 = mass[:, :, None, None] * (d1 @ d1)[None, None] + 0.0 * k_conv
+        return self._flatten(k_conv), self._flatten(c_conv @ d1[None, None]), self._flatten(a2), self._flatten(c_conv)
 
     def _periodic_coefficients(self, system, p, quad):
         """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
@@ -140,7 +204,7 @@ class HarmonicBalance:
         n, H, nu = self.ndof, self.harmonics, self.nu
         s, kernel_cos, kernel_sin, frozen = quad
         eye = jnp.eye(n)
-        if frozen is not None:  # only the forcing is needed: probe at 0 alone
+        if frozen is not None:  # only the forcing is needed (frozen blocks, or False): probe at 0 alone
             eye = jnp.zeros((0, n))
         probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros_like(eye)])
         probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros_like(eye), eye])
@@ -161,16 +225,36 @@ class HarmonicBalance:
         """``(L, F, C_conv)`` in SI: ``L = M D^2 + K_conv + C_conv D``, forcing vector ``F``."""
         H = self.harmonics
         quad = self.quadrature(system) if quad is None else quad
-        forcing, stiffness, damping = self._periodic_coefficients(system, p, quad)
         if quad[3] is not None:
-            k_conv, c_conv = quad[3]
-        else:
-            k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
-            c_conv = fourier.convolution_matrix(damping, H, jnp)
+            a0, a1, a2, c_flat, _ = quad[3]
+            w = self.base_frequency(system, p)
+            return a0 + w * a1 + w**2 * a2, self._forcing(system, p, quad), c_flat
+        forcing, stiffness, damping = self._periodic_coefficients(system, p, quad)
+        forcing = fourier.coefficients_to_real(forcing, H, jnp).reshape(self.size)
+        k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
+        c_conv = fourier.convolution_matrix(damping, H, jnp)
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
         mass = system.mass_matrix(p, jnp)
         op = mass[:, :, None, None] * (d @ d)[None, None] + k_conv + c_conv @ d[None, None]
-        return self._flatten(op), fourier.coefficients_to_real(forcing, H, jnp).reshape(self.size), self._flatten(c_conv)
+        return self._flatten(op), forcing, self._flatten(c_conv)
+
+    def _linear_response(self, x, p, system, quad):
+        """``L x - F`` in SI; with the frozen pieces as three matrix-vector products."""
+        if quad[3] is None:
+            lin, forcing, _ = self.linear_operator(system, p, quad)
+            return lin @ x - forcing
+        a0, a1, a2, _, _ = quad[3]
+        w = self.base_frequency(system, p)
+        return a0 @ x + w * (a1 @ x) + w**2 * (a2 @ x) - self._forcing(system, p, quad)
+
+    def _forcing(self, system, p, quad):
+        """The forcing vector ``F`` (real coefficients, SI): combined from the frozen pieces when
+        there are some (:meth:`_forcing_pieces`), else by quadrature."""
+        pieces = quad[3][4] if quad[3] is not None else None
+        if pieces is not None:
+            return self._combined_forcing(system, p, pieces)
+        forcing, _, _ = self._periodic_coefficients(system, p, quad)
+        return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
 
     def _flatten(self, blocks):
         return jnp.transpose(blocks, (0, 2, 1, 3)).reshape(self.size, self.size)
@@ -203,8 +287,11 @@ class HarmonicBalance:
 
     def _residual(self, z, p, system, quad, operator=None):
         x, extra = self._split(system, z)
-        lin, forcing, _ = self.linear_operator(system, p, quad) if operator is None else operator
-        r = lin @ x - forcing - self._nonlinear(x, self._velocity(x, system, p), extra, p, system)
+        if operator is None:
+            linear = self._linear_response(x, p, system, quad)
+        else:
+            linear = operator[0] @ x - operator[1]
+        r = linear - self._nonlinear(x, self._velocity(x, system, p), extra, p, system)
         k = system.free_mean_dof
         if k is not None:
             r = r.at[k * self.block].add(extra)
@@ -259,35 +346,47 @@ class HarmonicBalance:
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (2, n, n, B, B)
         return self._flatten(blocks[0]), self._flatten(blocks[1]), jnp.kron(jnp.eye(n), d)
 
+    def _times_derivative(self, a, system, p):
+        """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times
+        column ``b_k``, column ``b_k`` becomes ``k w`` times column ``a_k``, column ``a_0`` zero."""
+        d = fourier.derivative_matrix(self.harmonics, 1.0)  # numpy: static structure
+        source = np.argmax(np.abs(d), axis=0)  # the one nonzero row of each column of D
+        factor = d[source, np.arange(self.block)]
+        source = (np.arange(self.ndof)[:, None] * self.block + source[None]).ravel()
+        factor = np.tile(factor, self.ndof) * self.base_frequency(system, p)
+        return a[:, source] * factor
+
     def _toeplitz_ok(self, system) -> bool:
         """The sampled-derivative Jacobian is exact when ``N > 4H``."""
         return system.is_linear or self.samples > 4 * self.harmonics
 
-    @partial(jax.jit, static_argnums=0)
-    def _residual_and_jacobian_jit(self, z, p, system, quad):
-        operator = self.linear_operator(system, p, quad)
-        r = self._residual(z, p, system, quad, operator)
+    def _jacobian(self, z, p, system, quad, operator):
+        """``dR/dz`` (scaled) at the linear operator ``operator = (L, F, C)`` of ``p``."""
         if not self._toeplitz_ok(system):
-            return r, jax.jacfwd(self._residual)(z, p, system, quad, operator)
+            return jax.jacfwd(self._residual)(z, p, system, quad, operator)
         jac = operator[0]
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v, d = self._nonlinear_jacobian(x, extra, p, system)
-            jac = jac - t_q - t_v @ d
+            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+            jac = jac - t_q - self._times_derivative(t_v, system, p)
         jac = jac * (system.displacement_scale / system.force_scale)
         k = system.free_mean_dof
         if k is not None:
             slot = k * self.block
             jac = jac.at[:, slot].set(0.0).at[slot, slot].add(1.0)
-        return r, jac
+        return jac
+
+    @partial(jax.jit, static_argnums=0)
+    def _residual_and_jacobian_jit(self, z, p, system, quad):
+        operator = self.linear_operator(system, p, quad)
+        return self._residual(z, p, system, quad, operator), self._jacobian(z, p, system, quad, operator)
 
     @partial(jax.jit, static_argnums=0)
     def _residual_and_jacobians_jit(self, z, p, system, quad):
-        # dR/dz at a fixed operator, and dR/dp as ONE directional derivative: a joint jacfwd
-        # would push all size+1 tangents through the operator's construction
-        r, jz = self._residual_and_jacobian_jit.__wrapped__(self, z, p, system, quad)
-        _, jp = jax.jvp(lambda pp: self._residual(z, pp, system, quad), (p,), (jnp.ones_like(p),))
-        return r, jz, jp
+        # R and dR/dp as ONE directional derivative in p (its primal is R; a joint jacfwd would
+        # push all size+1 tangents through the operator's construction), dR/dz at a fixed operator
+        r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, quad), (p,), (jnp.ones_like(p),))
+        return r, self._jacobian(z, p, system, quad, self.linear_operator(system, p, quad)), jp
 
     @partial(jax.jit, static_argnums=0)
     def _hill_matrices_jit(self, z, p, system, quad):
@@ -301,8 +400,8 @@ class HarmonicBalance:
             if system.is_linear:
                 jz, jv = lin / fs, c_conv / fs
             else:
-                t_q, t_v, d_big = self._nonlinear_jacobian(x, extra, p, system)
-                jz, jv = (lin - t_q - t_v @ d_big) / fs, (c_conv - t_v) / fs
+                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+                jz, jv = (lin - t_q - self._times_derivative(t_v, system, p)) / fs, (c_conv - t_v) / fs
         else:
 
             def response(xx, shift):

@@ -8,7 +8,10 @@ period ``2 pi / w_exc(p)``, ``p`` the scalar parameter being varied (a speed, a 
 - ``ndof`` (int), ``is_linear`` (bool), ``free_mean_dof`` (int or None: a coordinate whose mean
   is pinned to 0 and replaced by a constant force unknown ``extra`` entering ``Q``),
 - ``mass_matrix(p, xp)``, ``excitation_frequency(p)`` [rad/s], ``breakpoints(p, xp)``,
-- ``force(s, q, qd, p, part, extra, xp)``, ``displacement_scale``, ``force_scale``.
+- ``force(s, q, qd, p, part, extra, xp)``, ``displacement_scale``, ``force_scale``;
+- optional speed-ups (both default False): ``coefficients_independent_of_parameter`` (``M`` and
+  the periodic stiffness and damping of ``Q_lin`` do not depend on ``p``) and
+  ``forcing_affine_in_frequency`` (``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``).
 
 Systems are JAX pytrees, so changing their float parameters never triggers recompilation.
 """
@@ -74,6 +77,20 @@ class GearSystem:
         return not friction_in_coefficients or m.friction.name in ("none", "coulomb")
 
     @property
+    def forcing_affine_in_frequency(self) -> bool:
+        """True when the forcing (the linear part at ``q = q' = 0``) is ``Fbar(w) + A(s) + w B(s)``.
+
+        In a speed sweep the mesh term ``-k eps - c eps'`` is affine in ``w`` (``eps' ~ w_m``),
+        the input/output torques and the spring's wind-up ``u_s(w)`` are constant in ``s``; only
+        a linear friction term with a velocity scale (arctan, Kelley--Lemanski in LTI/LTV)
+        depends on the speed otherwise. Checked numerically by the harmonic balance.
+        """
+        if self.parameter != "speed":
+            return False
+        m = self.model
+        return not m.friction_is_linear or m.friction.name in ("none", "coulomb")
+
+    @property
     def displacement_scale(self):
         return self.model.normal_load_N / self.model.k_mean_N_per_m
 
@@ -95,7 +112,10 @@ class GearSystem:
 
     def force(self, s, q, qd, p, part, extra, xp=np):
         model, omega = self._at(p)
-        u_static = model.static_state(omega, xp)[1] if model.boundary == "spring" else 0.0
+        # the spring's static wind-up enters the constant terms only (not the "nonlinear" part),
+        # and costs a quadrature of its own: skip it where it is not used
+        needs_windup = model.boundary == "spring" and part != "nonlinear"
+        u_static = model.static_state(omega, xp)[1] if needs_windup else 0.0
         return model.generalized_force(s, q, qd, omega, part, u_static, extra, xp)
 
 
@@ -115,6 +135,7 @@ class Duffing:
     ndof = 1
     free_mean_dof = None
     coefficients_independent_of_parameter = True
+    forcing_affine_in_frequency = True
     displacement_scale = 1.0
     force_scale = 1.0
 

@@ -293,3 +293,54 @@ def test_jit_step_failures_and_fallback():
     plain = continuation(circle_rj, circle_r, [0.9], 0.0, 2.0, PseudoArclength(**opts), tolerance=1e-13)
     assert fallback.status == plain.status == Status.TURNED_BACK
     assert np.array_equal(fallback.z, plain.z) and np.array_equal(fallback.p, plain.p)
+
+
+def _correctors(hb, system, scale):
+    from hbgear.continuation import _jit_call, _jit_corrector, _python_corrector
+
+    rj, r = problem(hb, system)
+    compiled = _jit_corrector(rj, r, scale, hb.size)
+    return _python_corrector(rj, r, scale, hb.size), compiled
+
+
+def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
+    """From the same predictor, the chord corrector (LU of the previous point, Sherman--Morrison
+    for the new border row) lands on the Python Newton corrector's point, with its tangent; a
+    factorisation from far away fails to contract and the Newton restart still lands there."""
+    from hbgear.continuation import _jit_call
+
+    scale = 2.0
+    python, compiled = _correctors(HB7, DUFFING, scale)
+    i = len(duffing_h7) // 3
+    y0 = np.append(duffing_h7.z[i], duffing_h7.p[i] / scale)
+    y1 = np.append(duffing_h7.z[i + 1], duffing_h7.p[i + 1] / scale)
+    chord = _jit_call(compiled, chord=True)
+    secant = (y1 - y0) / np.linalg.norm(y1 - y0)
+    at_y0 = chord(y0, secant, secant @ y0, secant, 0, np.inf)  # converged at once: tangent + LU at y0
+    t = at_y0.tangent
+    np.testing.assert_allclose(t, python(y0, secant, secant @ y0, secant, 0, np.inf).tangent, atol=1e-12)
+    y_pred = y0 + 1.5 * np.linalg.norm(y1 - y0) * t
+    ref = python(y_pred, t, t @ y_pred, t, 10, 1e-11)
+    got = chord(y_pred, t, t @ y_pred, t, 10, 1e-11)
+    assert got.iterations >= 1 and got.r_norm <= 1e-11
+    np.testing.assert_allclose(got.y, ref.y, atol=1e-10)
+    np.testing.assert_allclose(got.tangent, ref.tangent, atol=1e-9)
+
+    far = _jit_call(compiled, chord=True)
+    y_far = np.append(duffing_h7.z[-1], duffing_h7.p[-1] / scale)
+    far(y_far, secant, secant @ y_far, secant, 0, np.inf)  # keeps the LU of the last point
+    restarted = far(y_pred, t, t @ y_pred, t, 10, 1e-11)
+    assert restarted.iterations > ref.iterations  # the chord steps tried count too
+    np.testing.assert_allclose(restarted.y, ref.y, atol=1e-10)
+
+
+def test_chord_branch_matches_the_newton_branch(duffing_h7):
+    """The whole branch with the compiled chord corrector: same folds and end point to the tolerance."""
+    chord = continuation(*problem(HB7, DUFFING), np.zeros(HB7.size), 0.5, 2.0,
+                         PseudoArclength(jit_step=True, chord=True), tolerance=1e-10, max_points=2000)
+    assert chord.status == Status.SUCCESS, chord.message
+    assert np.max(chord.residual) <= 1e-10
+    assert len(chord.folds) == len(duffing_h7.folds) == 2
+    assert chord.fold_p == pytest.approx(duffing_h7.fold_p, rel=1e-8)
+    np.testing.assert_allclose(chord.z[-1], duffing_h7.z[-1], atol=1e-9)
+    np.testing.assert_allclose(chord.z[chord.folds], duffing_h7.z[duffing_h7.folds], atol=1e-6)

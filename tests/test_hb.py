@@ -157,3 +157,51 @@ def test_auto_harmonics_reports_h_and_meets_its_tail_criterion():
     tail = np.sqrt(np.sum(amp[(3 * solution.harmonics) // 4 :] ** 2))
     assert tail <= 1e-3 * np.sqrt(np.sum(amp**2))
     assert solution.harmonics >= 16
+
+
+# -- the speed-independent pieces of a sweep, against the full construction ---------------------
+
+
+def test_frozen_operator_and_forcing_pieces_equal_the_full_construction():
+    """L = A0 + w A1 + w^2 A2 and the forcing from its pieces equal the quadrature at every speed,
+    with their speed derivatives (NLTV arctan, soft spring: the wind-up u_s(w) is in the mean)."""
+    import jax
+
+    model = model_with("friction.model=NLTV", "friction.law=arctan")
+    hb, system = HarmonicBalance(model.ndof, 8, 1, 64), GearSystem(model)
+    quad = hb.quadrature(system)
+    assert quad[3] is not None and quad[3][4] is not None
+    full = quad[:3] + (None,)
+    for rpm in (2000.0, 9000.0, 13400.0, 21000.0):
+        w = rpm_to_rad_s(rpm)
+        fast, slow = jax.jvp(lambda p: hb.linear_operator(system, p, quad), (w,), (1.0,)), jax.jvp(
+            lambda p: hb.linear_operator(system, p, full), (w,), (1.0,))
+        for got, want, got_dp, want_dp in zip(fast[0], slow[0], fast[1], slow[1]):
+            scale = float(jnp.max(jnp.abs(want)))  # derivatives on the scale of (value / w)
+            assert scale > 0 and float(jnp.max(jnp.abs(got - want))) <= 1e-11 * scale
+            assert float(jnp.max(jnp.abs(got_dp - want_dp))) <= 1e-11 * scale / w
+
+
+def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
+    """A system that declares an affine forcing but is not: the check at a third speed refuses the
+    pieces and the residual uses the quadrature (LTV arctan friction makes the forcing nonlinear in w)."""
+    from dataclasses import dataclass
+
+    from jax.tree_util import register_dataclass
+
+    @register_dataclass
+    @dataclass(frozen=True)
+    class ClaimsAffine(GearSystem):
+        @property
+        def forcing_affine_in_frequency(self):
+            return True
+
+    model = model_with("friction.model=LTV", "friction.law=arctan", "friction.formulation='A'")
+    honest, liar = GearSystem(model), ClaimsAffine(model)
+    assert not honest.forcing_affine_in_frequency
+    hb = HarmonicBalance(model.ndof, 8, 1, 64)
+    quad = hb.quadrature(liar)
+    assert quad[3] is not None and quad[3][4] is None
+    z, w = np.linspace(-1, 1, hb.size) * 1e-2, rpm_to_rad_s(13000.0)
+    np.testing.assert_allclose(hb.residual(jnp.asarray(z), w, liar), hb.residual(jnp.asarray(z), w, honest),
+                               rtol=0, atol=1e-13)

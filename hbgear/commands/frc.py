@@ -109,7 +109,7 @@ def frc_method(omega_start, omega_stop, step_rad_s=None) -> PseudoArclength:
     dp_max = max(dp_max, ds)
     return PseudoArclength(
         ds=ds, ds_min=min(1e-7, ds / 10), ds_max=max(0.25, ds), max_angle_deg=5.0,
-        parameter_scale=scale, max_parameter_step=dp_max, jit_step=True,
+        parameter_scale=scale, max_parameter_step=dp_max, jit_step=True, chord=True,
     )
 
 
