@@ -863,7 +863,7 @@ def check_fig13():
             "note": note + "\n\nScript: `validation/fig13_stability_map.py` (exact monodromy / Magnus)."}
 
 
-def _script(stem: str, module: str, **kwargs):
+def _main_script(stem: str, module: str, **kwargs):
     """Run a figure script's ``main`` quietly; copy its PNG; return ``(result, note)``."""
     import importlib
 
@@ -877,7 +877,7 @@ def _script(stem: str, module: str, **kwargs):
 
 @check("fig12_ltv_nltv", "Fig. 12: near an unstable zone LTV diverges, NLTV stays bounded (where it does)", 300)
 def check_fig12():
-    result, note = _script("fig12_ltv_vs_nltv", "fig12_ltv_vs_nltv")
+    result, note = _main_script("fig12_ltv_vs_nltv", "fig12_ltv_vs_nltv")
     case = result["case"]
     rows = [row("NLTV-A growth per cycle at the zone's most unstable speed (info)", result["rate_nltv_a"], None)]
     if case is None:
@@ -896,7 +896,7 @@ def check_fig12():
 
 @check("fig14_ratio", "Fig. 14: ratio of LTV to NLTV peak-to-peak DTE over speed x contact ratio", 280)
 def check_fig14():
-    result, note = _script("fig14_ltv_nltv_ratio", "fig14_ltv_nltv_ratio")
+    result, note = _main_script("fig14_ltv_nltv_ratio", "fig14_ltv_nltv_ratio")
     ratio = np.asarray(result["ratio"], dtype=float)
     finite = ratio[np.isfinite(ratio)]
     rows = [
@@ -922,7 +922,7 @@ def check_fig14():
 
 @check("backlash_frc", "Backlash: frequency-response curve through both folds vs up/down time-integration sweeps", 120)
 def check_backlash():
-    result, note = _script("backlash_frc", "backlash_frc")
+    result, note = _main_script("backlash_frc", "backlash_frc")
     (fold_lo, fold_hi), (down, up) = result["folds"], result["jumps"]
     rows = [
         row("jump-up speed: HB fold vs TI up-sweep", abs(fold_hi / up - 1), 0.01, percent=True),
