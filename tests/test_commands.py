@@ -4,6 +4,7 @@ import csv
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hbgear import cli
@@ -54,3 +55,26 @@ def test_validate_agrees_with_time_integration(tmp_path, boundary):
     assert values["speed_rpm"] == pytest.approx(3000.0)
     assert abs(values["rel_diff_rms"]) < 1e-3 and abs(values["rel_diff_p2p"]) < 1e-3
     assert (out / "validation.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("model", ["LTV", "NLTV"])  # exact monodromy / Hill's method
+def test_frc_writes_every_floquet_multiplier(tmp_path, model):
+    out = tmp_path / "frc"
+    argv = ["frc", str(EXAMPLE), "--no-progress", "--out", str(out), "--set", "solver.harmonics=8",
+            "--set", "solver.time_samples=64", "--set", f"friction.model='{model}'", "--set", "friction.law='arctan'",
+            "--set", "sweep.speed_rpm_start=12000.0", "--set", "sweep.speed_rpm_stop=12600.0"]
+    assert cli.main(argv) == 0
+    with open(out / "frc.csv", newline="") as fh:
+        curve = np.array(list(csv.reader(fh))[1:], dtype=float)
+    with open(out / "floquet.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["row", "speed_rpm", "index", "multiplier_re", "multiplier_im", "multiplier_abs"]
+    table = np.array(rows[1:], dtype=float)
+    point = table[:, 0].astype(int)
+    assert np.array_equal(np.unique(point), np.arange(len(curve)))  # every point, none else
+    assert np.all(np.bincount(point) == 4)  # 2n multipliers, n = 2 (DTE and the soft output mode)
+    assert table[:, 1] == pytest.approx(curve[point, 0], rel=1e-14)
+    assert table[:, 5] == pytest.approx(np.hypot(table[:, 3], table[:, 4]), rel=1e-12)
+    first = table[:, 2] == 0  # sorted by modulus: index 0 is the largest, the frc.csv column
+    assert table[first, 5] == pytest.approx(curve[:, 6], rel=1e-12)
+    assert np.all(np.diff(table[:, 5].reshape(-1, 4), axis=1) <= 0)

@@ -13,6 +13,9 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
   crossing: bracket, located speed and multiplier, the ``nu = 2`` branch's status, message,
   point count, first frc.csv row, ranges) and ``period_doubling_rule``, continuation settings,
   timings, the config;
+- `floquet.csv`: ``row, speed_rpm, index, multiplier_re, multiplier_im, multiplier_abs`` -- every
+  Floquet multiplier (over the base period) of every ``nu = 1`` point, ``row`` indexing the data
+  rows of `frc.csv` (not written with ``--no-stability``);
 - `frc.png`: DTE RMS and peak-to-peak against speed, unstable points and folds marked, the
   ``nu = 2`` branches in green, the period doublings as squares.
 
@@ -55,7 +58,7 @@ from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 from ..system import GearSystem
 
-__all__ = ["FRC", "COLUMNS", "run", "frc_method", "gear_residual_functions", "plot_frc",
+__all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "frc_method", "gear_residual_functions", "plot_frc",
            "PD_AUTO_MAX_UNKNOWNS", "period_doubling_enabled", "follow_period_doubling"]
 
 COLUMNS = (
@@ -70,6 +73,23 @@ COLUMNS = (
     "nu",
     "residual",
 )
+
+#: Columns of `floquet.csv`: one row per multiplier of every ``nu = 1`` point, ``row`` being the
+#: point's data row in `frc.csv` (0 = first), multipliers over the base period, sorted by
+#: decreasing modulus.
+FLOQUET_COLUMNS = ("row", "speed_rpm", "index", "multiplier_re", "multiplier_im", "multiplier_abs")
+
+
+def floquet_rows(speed_rpm, multipliers) -> list[list]:
+    """The `floquet.csv` rows of the points whose multipliers are known (``None`` skipped)."""
+    rows = []
+    for row, (rpm, mult) in enumerate(zip(speed_rpm, multipliers)):
+        if mult is None:
+            continue
+        mult = np.asarray(mult, dtype=complex)
+        for k, m in enumerate(mult[np.argsort(-np.abs(mult), kind="stable")]):
+            rows.append([row, float(rpm), k, float(m.real), float(m.imag), float(abs(m))])
+    return rows
 
 
 def add_arguments(parser) -> None:
@@ -642,6 +662,8 @@ def run(config, args, out_dir) -> int:
         if not math.isnan(row[7]):
             row[7] = int(row[7])
     write_csv_atomic(out_dir / "frc.csv", COLUMNS, rows + pd_rows)
+    if any(m is not None for m in multipliers):
+        write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, floquet_rows(speed_rpm, multipliers))
 
     folds = branch.folds
     fold_info = [
