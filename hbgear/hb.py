@@ -128,10 +128,9 @@ class HarmonicBalance:
         if key not in _FROZEN_CACHE:
             if len(_FROZEN_CACHE) > 64:
                 _FROZEN_CACHE.clear()
-            # concrete even when first asked for under an outer vmap/jvp (not under jit: the calls
-            # are staged there); not outside a trace: in that mode
-            # every operation on constants inside the traced functions is compiled on its own
-            # (~50 small XLA programs, ~1 s at every start)
+            # compile-time evaluation only under an outer trace (vmap/jvp; under jit the calls are
+            # staged anyway): outside one it would compile every operation on constants inside
+            # the traced functions on its own (~50 small XLA programs, ~1 s at every start)
             with jax.ensure_compile_time_eval() if _under_trace() else contextlib.nullcontext():
                 blocks = self._blocks_jit(system, p, quad + (None,))
                 _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
