@@ -15,7 +15,9 @@ deflection; ``p_ref`` defaults to ``max(|p0|, |p_end|)``). Each step:
    ``ds`` off the predictor, and the new tangent turned by at most ``max_angle_deg``; otherwise
    ``ds`` is halved and the step retried. Below ``ds_min`` the run stops with
    :attr:`Status.STEP_TOO_SMALL` and a message saying where, what was tried and the residual.
-5. **Step size**: ``ds *= clip(min(target_iterations / iterations, max_angle / (2 angle)), 1/2, 2)``,
+5. **Step size**: ``ds *= clip(min(target_iterations / work, max_angle / (2 angle)), 1/2, 2)``, with
+   ``work`` the corrector's Newton iterations plus half its chord iterations (a chord iteration
+   is one residual and two triangular solves, about half a Newton iteration's cost),
    kept in ``[ds_min, ds_max]`` and, optionally, so that the predicted change of ``p/p_ref`` is
    at most ``max_parameter_step``.
 
@@ -83,7 +85,8 @@ class PseudoArclength:
 
     - `ds`: initial arclength step in ``(z, p/p_ref)`` [-]; `ds_min`, `ds_max`: its bounds.
     - `max_corrector_iterations`: Newton iterations allowed per step.
-    - `target_iterations`: the corrector iterations the step-size control aims at.
+    - `target_iterations`: the Newton-equivalent corrector iterations the step-size control
+      aims at (a chord iteration counts one half).
     - `max_angle_deg`: largest angle between successive tangents [deg].
     - `parameter_scale`: ``p_ref`` [units of p]; ``None`` = ``max(|p0|, |p_end|)``.
     - `growth`: largest factor by which ``ds`` grows after a step (it shrinks by at most 2).
@@ -103,8 +106,10 @@ class PseudoArclength:
       Jacobian is evaluated once per point, at the converged point, for its tangent. If the
       chord iteration does not halve ``max |R|`` at every step, the full Newton corrector runs
       from the predictor. Same acceptance test (``max |R| <= tolerance``), so the points agree
-      with the Newton corrector's to the tolerance; the iteration counts (and so the step
-      sizes) differ. Without `jit_step` it has no effect.
+      with the Newton corrector's to the tolerance; the iteration counts differ (the step-size
+      control counts a chord iteration as half a Newton iteration, by cost, so that the chord
+      mode's slower, linear convergence does not shrink the steps). Without `jit_step` it has
+      no effect.
     """
 
     ds: float = 1e-2
@@ -184,7 +189,13 @@ class _Point(NamedTuple):
     y: np.ndarray  # (z, p/p_ref)
     r_norm: float
     tangent: np.ndarray  # unit tangent at y, oriented along the `previous` given to the corrector
-    iterations: int
+    iterations: int  # Newton + chord iterations (stored with the point)
+    work: float  # Newton-equivalent iterations, for the step-size control: Newton + chord / 2
+
+
+#: Cost of a chord iteration (one residual, two triangular solves) in Newton iterations (one
+#: (R, R_z, R_p) evaluation and one LU): the residual is about half an evaluation's cost.
+CHORD_ITERATION_WORK = 0.5
 
 
 class _Failure(NamedTuple):
@@ -243,7 +254,7 @@ def _python_corrector(residual_and_jacobians, residual, scale, size):
             if not np.isfinite(norm):
                 return _Failure(_FAILURES[1], norm, it)
             if norm <= tolerance and abs(row @ y - target) <= 1e-12 * (1 + abs(target)):
-                return _Point(y, norm, _tangent(a, previous), it)
+                return _Point(y, norm, _tangent(a, previous), it, it)
             if it == max_iter:
                 break
             a[size] = row
@@ -415,7 +426,7 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
                                lambda s: jax.lax.cond(s["mode"] == 3, chord, newton, s), init)
         t, new_factor = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous),
                                      lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
-        return s["y"], s["norm"], s["it"] + s["chord_it"], s["status"], t, new_factor
+        return s["y"], s["norm"], s["it"], s["chord_it"], s["status"], t, new_factor
 
     return correct, no_factor
 
@@ -437,11 +448,11 @@ def _jit_call(compiled, chord):
             empty = no_factor(jax.numpy.asarray(previous, dtype=float)) if empty is None else empty
             factor = empty[:3] + (np.asarray(previous, dtype=float), empty[4])
         out = correct(y_pred, row, float(target), previous, int(max_iter), float(tolerance), factor)
-        y, norm, it, status, t = jax.device_get(out[:5])
-        status, norm = int(status), float(norm)
+        y, norm, newton_it, chord_it, status, t = jax.device_get(out[:6])
+        status, norm, it = int(status), float(norm), int(newton_it) + int(chord_it)
         if status == 0:
-            last[0] = out[5]
-            return _Point(np.array(y), norm, np.array(t), int(it))
+            last[0] = out[6]
+            return _Point(np.array(y), norm, np.array(t), it, int(newton_it) + CHORD_ITERATION_WORK * int(chord_it))
         if status == 3:
             return _Failure(f"not converged in {max_iter} corrector iterations", norm, int(max_iter))
         return _Failure(_FAILURES[status], norm, int(it))
@@ -666,7 +677,7 @@ def continuation(
 
             store(y_new, PointKind.REGULAR, point.iterations, point.r_norm, t_new, ds)
             angle = _angle_deg(t_new, t)
-            factor = m.target_iterations / max(point.iterations, 1)
+            factor = m.target_iterations / max(point.work, 1)
             if angle > 0:
                 factor = min(factor, m.max_angle_deg / (2 * angle))
             ds = min(m.ds_max, max(m.ds_min, ds * min(m.growth, max(0.5, factor))))

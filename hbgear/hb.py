@@ -22,6 +22,7 @@ The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from functools import partial
 
@@ -90,13 +91,11 @@ class HarmonicBalance:
 
     def _prepare(self, system, p):
         max_mesh_order = -(-2 * self.harmonics // self.nu)
-        with jax.ensure_compile_time_eval():  # concrete whenever the system is, even under jit
-            traced = system.breakpoints(p, jnp)
-        if isinstance(traced, jax.core.Tracer):  # called under an outer jit/vmap: build in-trace
-            s, w = mesh_period_rule(traced, max_mesh_order, jnp)
+        if _has_tracer((system, p)):  # a traced system (under an outer jit/vmap): build in-trace
+            s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
             phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
             return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None
-        breakpoints = tuple(np.round(np.asarray(traced, dtype=float), 15))
+        breakpoints = tuple(np.round(np.asarray(system.breakpoints(p, np), dtype=float), 15))
         key = (breakpoints, max_mesh_order)
         if key not in _QUADRATURE_CACHE:
             if len(_QUADRATURE_CACHE) > 64:
@@ -129,7 +128,10 @@ class HarmonicBalance:
         if key not in _FROZEN_CACHE:
             if len(_FROZEN_CACHE) > 64:
                 _FROZEN_CACHE.clear()
-            with jax.ensure_compile_time_eval():  # concrete even when first asked for under a trace
+            # compile-time evaluation only under an outer trace (vmap/jvp; under jit the calls are
+            # staged anyway): outside one it would compile every operation on constants inside
+            # the traced functions on its own (~50 small XLA programs, ~1 s at every start)
+            with jax.ensure_compile_time_eval() if _under_trace() else contextlib.nullcontext():
                 blocks = self._blocks_jit(system, p, quad + (None,))
                 _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
         return _FROZEN_CACHE[key]
@@ -414,6 +416,15 @@ class HarmonicBalance:
         d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
         d1 = (jv + 2 * jnp.kron(mass, d)) * xs
         return jz * xs, d1, d2
+
+
+def _has_tracer(tree) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def _under_trace() -> bool:
+    """True inside a jit/vmap trace (where operations on constants are staged, not run)."""
+    return isinstance(jnp.zeros(()) + 0.0, jax.core.Tracer)
 
 
 _QUADRATURE_CACHE: dict = {}

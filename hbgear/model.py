@@ -411,7 +411,61 @@ class GearPairModel:
             delta = delta + 0.5 * self.backlash_m
         if self.boundary != "spring":
             return delta, 0.0 * omega_pinion
+        closed = self._mean_static_friction_force(omega_pinion, xp)
+        if closed is not None:
+            mean_force = self.torque_pinion_Nm / self.base_radius_pinion_m + closed
+            return delta, mean_force / self.spring_stiffness_N_per_m
         q = xp.stack([delta, 0.0 * s])
         force = self.generalized_force(s, q, 0.0 * q, omega_pinion, "all", 0.0, 0.0, xp)
         # remove the spring's own term (q[1] = 0, qd = 0 -> it is zero) and average
         return delta, xp.sum(w * force[1]) / self.spring_stiffness_N_per_m
+
+    def _mean_static_friction_force(self, omega_pinion, xp=np):
+        r"""``< T_fp/R_bp + T_fg/R_bg >`` [N] of the quasi-static state in closed form, for the
+        laws of ``sgn(V_s)`` or ``atan(V_s/V_0)`` (``None`` for other laws: quadrature).
+
+        At the quasi-static state the speeds are nominal and the pair loads ``sigma_j N`` (also in
+        formulation B: ``F_mesh = N`` there), so on each piece of the period where the pairs in
+        contact do not change, slot ``j`` contributes ``sigma_j N int (alpha + beta s) mu(gamma +
+        delta s) ds``: the moment arm ``-xi_p/R_bp + xi_g/R_bg`` and the sliding velocity
+        ``V_s = xi_p (W_p + W_g) - L W_g`` are affine in ``s``. With ``x = V_s / V_0``, ``A + B x``
+        the arm, ``int (A + B x) atan x dx = A (x atan x - ln(1+x^2)/2) + B ((x^2+1) atan x - x)/2``;
+        for ``sgn``, the integral of the arm changes sign where ``V_s`` does.
+        """
+        name = self.friction.name
+        if name not in ("arctan", "coulomb", "none"):
+            return None
+        if name == "none":
+            return 0.0 * omega_pinion
+        wp, wg, _ = self.speeds(omega_pinion)
+        rbp, rbg, pitch = self.base_radius_pinion_m, self.base_radius_gear_m, self.base_pitch_m
+        slope = pitch * (wp + wg)  # d V_s / d s
+        beta = -pitch * (1.0 / rbp + 1.0 / rbg)  # d arm / d s
+        moving = xp.abs(slope) > 0
+        slope_safe = xp.where(moving, slope, 1.0)
+        g1 = self.contact_ratio - 1.0
+        total = 0.0 * omega_pinion
+        # (slot, from, to, load share): two pairs until Gamma - 1, then slot 0 alone
+        for slot, a, b, share in ((0, 0.0, g1, 0.5), (1, 0.0, g1, 0.5), (0, g1, 1.0, 1.0)):
+            xi0 = self.contact_start_m + pitch * slot  # xi_p at s = 0
+            gamma = xi0 * (wp + wg) - self.line_of_action_m * wg
+            alpha = self.line_of_action_m / rbg - xi0 * (1.0 / rbp + 1.0 / rbg)
+            if name == "arctan":
+                v0 = self.friction.v0
+                big_a, big_b = alpha - beta * gamma / slope_safe, beta * v0 / slope_safe
+
+                def antiderivative(s):
+                    x = (gamma + slope_safe * s) / v0
+                    at = xp.arctan(x)
+                    return big_a * (x * at - 0.5 * xp.log1p(x * x)) + big_b * 0.5 * ((x * x + 1.0) * at - x)
+
+                piece = (2.0 * self.friction.mu0 / np.pi) * (v0 / slope_safe) * (antiderivative(b) - antiderivative(a))
+            else:  # coulomb: sgn(gamma + slope s) = sgn(slope) sgn(s - s0)
+                s0 = xp.clip(-gamma / slope_safe, a, b)
+
+                def arm_integral(s):
+                    return alpha * s + 0.5 * beta * s * s
+
+                piece = self.friction.mu0 * xp.sign(slope) * (arm_integral(b) - 2.0 * arm_integral(s0) + arm_integral(a))
+            total = total + share * self.normal_load_N * xp.where(moving, piece, 0.0)
+        return total

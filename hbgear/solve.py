@@ -1,9 +1,12 @@
 """One periodic steady state of the gear pair by harmonic balance.
 
 LTV models are linear: one exact solve of ``K_h(w) X = F(w)`` (the paper's Eq. 23).
-Nonlinear models (NLTV friction, backlash) start from the LTV solution of the same pair and
-run a damped Newton iteration; if that fails for a steep friction law, the law's smoothing
-velocity is continued from a gentle value down to the requested one. Non-convergence raises
+Nonlinear models run a damped Newton iteration: without backlash first from the quasi-static
+state (no LTV model to trace and compile: the NLTV friction is a mild nonlinearity away from the
+pitch point, a few iterations suffice), then, or with backlash at once, from the LTV solution of
+the same pair (with backlash the linear response picks the non-impacting state among coexisting
+ones); if that fails for a steep friction law, the law's smoothing velocity is continued from a
+gentle value down to the requested one. Non-convergence raises
 :class:`~hbgear.errors.ConvergenceError` with the speed, what was tried and the residual.
 """
 
@@ -147,13 +150,30 @@ def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
 
 
 def _newton(hb, system, omega, z0, tolerance, max_iterations):
+    # (R, dR/dz, dR/dp), the evaluation continuation uses, with dR/dp dropped: a start solution
+    # followed by a curve then traces and compiles one Jacobian function, not two
     def both(z):
-        return hb.residual_and_jacobian(jnp.asarray(z), omega, system)
+        return hb.residual_and_jacobians(jnp.asarray(z), omega, system)[:2]
 
     def resid(z):
         return hb.residual(jnp.asarray(z), omega, system)
 
     return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations)
+
+
+_STATIC_START_ITERATIONS = 10
+
+
+def _quasi_static_start(model: GearPairModel, hb: HarmonicBalance, system: GearSystem) -> np.ndarray:
+    """Scaled unknowns of the quasi-static state: DTE mean ``N <1/k>`` plus the STE mean (zero),
+    harmonics zero; for the reaction boundary the output force unknown ``T_p / R_bp``."""
+    z = np.zeros(hb.size)
+    g = float(model.contact_ratio)
+    mean_compliance = (g - 1.0) / float(model.k_max_N_per_m) + (2.0 - g) / float(model.k_min_N_per_m)
+    z[0] = float(model.normal_load_N) * mean_compliance / float(system.displacement_scale)
+    if system.free_mean_dof is not None:
+        z[system.free_mean_dof * hb.block] = 1.0  # T_g / R_bg ~ N, in units of force_scale = N
+    return z
 
 
 def _smoothing_field(model: GearPairModel):
@@ -190,16 +210,23 @@ def solve_periodic(
         result = _newton(hb, system, omega, z, tolerance, 3)
         tried.append("direct linear solve")
     else:
-        start_name = "given"
-        if z0 is None:
-            linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
-            start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
-            z0 = np.array(start.z)
-            if model.contact == "backlash":  # the loaded teeth sit half the backlash further on
-                z0[0] += 0.5 * float(model.backlash_m) / float(system.displacement_scale)
-            start_name = "LTV"
-        result = _newton(hb, system, omega, z0, tolerance, max_iterations)
-        tried.append(f"Newton from the {start_name} start ({result.iterations} iterations)")
+        result = None
+        if z0 is None and model.contact == "linear":
+            z0 = _quasi_static_start(model, hb, system)
+            result = _newton(hb, system, omega, z0, tolerance, min(max_iterations, _STATIC_START_ITERATIONS))
+            tried.append(f"Newton from the quasi-static state ({result.iterations} iterations)")
+            z0 = z0 if result.converged else None
+        if result is None or not result.converged:
+            start_name = "given"
+            if z0 is None:
+                linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
+                start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
+                z0 = np.array(start.z)
+                if model.contact == "backlash":  # the loaded teeth sit half the backlash further on
+                    z0[0] += 0.5 * float(model.backlash_m) / float(system.displacement_scale)
+                start_name = "LTV"
+            result = _newton(hb, system, omega, z0, tolerance, max_iterations)
+            tried.append(f"Newton from the {start_name} start ({result.iterations} iterations)")
         name = _smoothing_field(model)
         if not result.converged and name is not None:
             target = getattr(model.friction, name)

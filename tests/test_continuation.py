@@ -344,3 +344,32 @@ def test_chord_branch_matches_the_newton_branch(duffing_h7):
     assert chord.fold_p == pytest.approx(duffing_h7.fold_p, rel=1e-8)
     np.testing.assert_allclose(chord.z[-1], duffing_h7.z[-1], atol=1e-9)
     np.testing.assert_allclose(chord.z[chord.folds], duffing_h7.z[duffing_h7.folds], atol=1e-6)
+
+
+def test_step_control_counts_a_chord_iteration_as_half_a_newton_iteration(duffing_h7):
+    """The step-size control counts work (Newton iterations + half the chord iterations), so the
+    chord corrector's slower, linear convergence does not shrink the steps: its branch has about
+    as many points as the Newton corrector's (counting chord iterations as Newton ones gave
+    ~2.7x as many on this curve)."""
+    from hbgear.continuation import CHORD_ITERATION_WORK, _jit_call
+
+    scale = 2.0
+    python, compiled = _correctors(HB7, DUFFING, scale)
+    i = len(duffing_h7) // 3
+    y0, y1 = (np.append(duffing_h7.z[j], duffing_h7.p[j] / scale) for j in (i, i + 1))
+    secant = (y1 - y0) / np.linalg.norm(y1 - y0)
+    chord = _jit_call(compiled, chord=True)
+    t = chord(y0, secant, secant @ y0, secant, 0, np.inf).tangent
+    y_pred = y0 + 1.5 * np.linalg.norm(y1 - y0) * t
+    got = chord(y_pred, t, t @ y_pred, t, 10, 1e-11)  # chord steps only
+    assert got.iterations >= 2 and got.work == CHORD_ITERATION_WORK * got.iterations
+    ref = python(y_pred, t, t @ y_pred, t, 10, 1e-11)
+    assert ref.work == ref.iterations
+
+    options = dict(tolerance=1e-10, max_points=2000)
+    newton_branch = continuation(*problem(HB7, DUFFING), np.zeros(HB7.size), 0.5, 2.0,
+                                 PseudoArclength(jit_step=True), **options)
+    chord_branch = continuation(*problem(HB7, DUFFING), np.zeros(HB7.size), 0.5, 2.0,
+                                PseudoArclength(jit_step=True, chord=True), **options)
+    assert newton_branch.status == chord_branch.status == Status.SUCCESS
+    assert len(chord_branch) <= 1.2 * len(newton_branch)

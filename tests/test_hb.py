@@ -205,3 +205,45 @@ def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
     z, w = np.linspace(-1, 1, hb.size) * 1e-2, rpm_to_rad_s(13000.0)
     np.testing.assert_allclose(hb.residual(jnp.asarray(z), w, liar), hb.residual(jnp.asarray(z), w, honest),
                                rtol=0, atol=1e-13)
+
+
+def test_frozen_pieces_first_asked_for_under_a_trace_are_concrete_and_equal():
+    """The speed-independent pieces built inside an outer vmap (the cache is empty) are concrete
+    arrays, equal to those built outside a trace."""
+    import jax
+
+    from hbgear import hb as hb_module
+
+    model = model_with("friction.model=NLTV", "friction.law=arctan")
+    hb, system = HarmonicBalance(model.ndof, 6, 1, 64), GearSystem(model)
+    hb_module._FROZEN_CACHE.clear()
+    hb_module._PREPARED.clear()
+    seen = []
+
+    def inside(x):
+        quad = hb.quadrature(system)
+        seen.append(quad[3])
+        return x
+
+    jax.vmap(inside)(jnp.ones(2))
+    assert seen and seen[0] is not None
+    assert not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(seen[0]))
+    hb_module._FROZEN_CACHE.clear()
+    hb_module._PREPARED.clear()
+    outside = hb.quadrature(system)[3]
+    for got, want in zip(jax.tree_util.tree_leaves(seen[0]), jax.tree_util.tree_leaves(outside)):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+@pytest.mark.parametrize("speed_rpm", [1000.0, 13400.0])
+def test_nonlinear_start_from_the_quasi_static_state_equals_the_ltv_start(speed_rpm):
+    """NLTV without backlash: Newton from the quasi-static state (the default) reaches the solution
+    Newton reaches from the LTV solution of the same pair."""
+    model = model_with("friction.model=NLTV", "friction.law=arctan")
+    w = rpm_to_rad_s(speed_rpm)
+    options = dict(harmonics=12, samples=256, tolerance=1e-12)
+    default = solve_periodic(model, w, **options)
+    ltv = solve_periodic(model.replace(coupling="LTV"), w, **options)
+    from_ltv = solve_periodic(model, w, z0=ltv.z, **options)
+    assert not np.allclose(ltv.z, from_ltv.z, rtol=0, atol=1e-6)  # the friction model matters here
+    np.testing.assert_allclose(default.z, from_ltv.z, rtol=0, atol=1e-8)

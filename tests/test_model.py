@@ -164,3 +164,46 @@ def test_mesh_damping_from_the_raw_config_numbers(coupling, zeta):
     qd[0] = 1.0
     slope = np.asarray(model.mesh_force(s, q, qd, omega)) - np.asarray(model.mesh_force(s, q, 0 * qd, omega))
     np.testing.assert_allclose(slope, c, rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["friction.model=NLTV", "friction.law=arctan"],
+        ["friction.model=NLTV", "friction.law=arctan", "friction.formulation='B'"],
+        ["friction.law=arctan", "friction.v0_m_per_s=0.001"],
+        ["friction.model=NLTV"],  # coulomb, regularised to arctan
+        [],  # LTV coulomb
+        ["friction.law=coulomb", "friction.formulation='B'", "gear.contact_ratio=1.7"],
+    ],
+)
+def test_static_windup_closed_form_equals_the_quadrature(overrides):
+    """The wind-up's mean friction force in closed form (sgn / atan laws) equals the graded
+    quadrature of the full generalised force, with its derivative in the speed."""
+    from pathlib import Path
+
+    from hbgear.config import load_config
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
+    model = build_model(load_config(example, overrides))
+    assert model._mean_static_friction_force(1000.0) is not None
+
+    def by_quadrature(omega):
+        s, w = mesh_period_rule(model.breakpoint_candidates(jnp), 8, jnp)
+        q = jnp.stack([model.normal_load_N / model.mesh_stiffness(s, jnp), 0.0 * s])
+        force = model.generalized_force(s, q, 0.0 * q, omega, "all", 0.0, 0.0, jnp)
+        return jnp.sum(w * force[1]) - model.torque_pinion_Nm / model.base_radius_pinion_m
+
+    def closed(omega):
+        return model._mean_static_friction_force(omega, jnp)
+
+    friction_scale = model.friction.mu0 * model.normal_load_N * model.line_of_action_m / model.base_radius_gear_m
+    for rpm in (50.0, 3000.0, 13400.0, 21000.0):
+        w = rpm * 2 * math.pi / 60
+        (got, got_dw), (want, want_dw) = jax.jvp(closed, (w,), (1.0,)), jax.jvp(by_quadrature, (w,), (1.0,))
+        assert abs(float(want)) > 1e-3 * friction_scale  # friction does load the spring
+        assert abs(float(got - want)) <= 1e-12 * friction_scale
+        assert abs(float(got_dw - want_dw)) <= 1e-10 * friction_scale / w
+    u_static = model.static_state(3000 * 2 * math.pi / 60)[1]
+    expected = (model.torque_pinion_Nm / model.base_radius_pinion_m + float(closed(3000 * 2 * math.pi / 60)))
+    assert float(u_static) == pytest.approx(expected / model.spring_stiffness_N_per_m, rel=1e-15)
