@@ -296,7 +296,7 @@ def test_jit_step_failures_and_fallback():
 
 
 def _correctors(hb, system, scale):
-    from hbgear.continuation import _jit_call, _jit_corrector, _python_corrector
+    from hbgear.continuation import _jit_corrector, _python_corrector
 
     rj, r = problem(hb, system)
     compiled = _jit_corrector(rj, r, scale, hb.size)
