@@ -78,3 +78,25 @@ def test_frc_writes_every_floquet_multiplier(tmp_path, model):
     first = table[:, 2] == 0  # sorted by modulus: index 0 is the largest, the frc.csv column
     assert table[first, 5] == pytest.approx(curve[:, 6], rel=1e-12)
     assert np.all(np.diff(table[:, 5].reshape(-1, 4), axis=1) <= 0)
+
+
+def test_unstable_zone_between_curve_points_is_found():
+    """The LTV-A pair has a period-doubling zone near 3800 rpm narrower than a curve step there."""
+    from hbgear.build import build_model
+    from hbgear.commands.frc import unstable_zones
+    from hbgear.config import load_config
+    from hbgear.solve import rpm_to_rad_s
+    from hbgear.stability import multipliers_linear
+
+    model = build_model(load_config(EXAMPLE))
+    around = rpm_to_rad_s(np.array([3791.5, 3819.7]))  # two stable curve points straddling the zone
+    assert all(np.max(np.abs(m)) <= 1 + 1e-9 for m in multipliers_linear(model, around))
+    zones = unstable_zones(model, around, subdivisions=12)
+    assert len(zones) == 1
+    zone = zones[0]
+    assert zone["between_curve_points"] and zone["leaves_through"] == "-1"
+    assert 3791.5 < zone["speed_rpm_from"] < zone["speed_rpm_to"] < 3819.7
+    assert zone["resolution_rpm"] == pytest.approx((3819.7 - 3791.5) / 12, rel=1e-6)
+    inside = multipliers_linear(model, rpm_to_rad_s(np.array([zone["speed_rpm_from"], zone["speed_rpm_to"]])))
+    assert all(np.max(np.abs(m)) > 1 + 1e-9 for m in inside)
+    assert unstable_zones(model, rpm_to_rad_s(np.array([3000.0, 3100.0]))) == []

@@ -11,7 +11,8 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 - `frc.json`: run summary -- status and message, ``H`` (and how it was chosen), ``nu``, number of
   points, folds (speeds), stability availability, ``period_doubling`` (one record per -1
   crossing: bracket, located speed and multiplier, the ``nu = 2`` branch's status, message,
-  point count, first frc.csv row, ranges) and ``period_doubling_rule``, continuation settings,
+  point count, first frc.csv row, ranges) and ``period_doubling_rule``, ``stability.unstable_zones``
+  (linear models: :func:`unstable_zones`, exact monodromy on a finer grid), continuation settings,
   timings, the config;
 - `floquet.csv`: ``row, speed_rpm, index, multiplier_re, multiplier_im, multiplier_abs`` -- every
   Floquet multiplier (over the base period) of every ``nu = 1`` point, ``row`` indexing the data
@@ -280,6 +281,48 @@ def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
         warning = ((fallback + "; ") if fallback else "") + (
             f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
     return out, method, warning
+
+
+#: Sub-intervals per curve step of the exact-monodromy scan for unstable zones (linear models).
+ZONE_SCAN_SUBDIVISIONS = 6
+
+
+def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> list[dict]:
+    """Speed intervals where a linear model's steady state is unstable, by exact monodromy on a grid
+    `subdivisions` times finer than the curve's points (:func:`hbgear.stability.multipliers_linear`).
+
+    A zone narrower than a curve step can lie between two stable points of the curve; this scan
+    finds it to the grid's resolution. Each zone: ``speed_rpm_from``, ``speed_rpm_to`` (first and
+    last unstable grid speed), ``max_abs_floquet`` and the multiplier at its maximum (through -1
+    = period doubling, +1 = divergence), ``resolution_rpm`` (the grid step at the zone) and
+    ``between_curve_points`` (no point of the curve itself falls inside).
+    """
+    from ..stability import is_stable, multipliers_linear
+
+    p = np.sort(np.asarray(speeds_rad_s, dtype=float))
+    frac = np.arange(subdivisions) / subdivisions
+    grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
+    mult = np.concatenate([np.asarray(multipliers_linear(model, grid[lo:lo + 512]))
+                           for lo in range(0, len(grid), 512)])
+    unstable = np.array([not is_stable(m) for m in mult])
+    zones = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        peak = start + int(np.argmax(np.abs(mult[start:stop]).max(axis=1)))
+        lead = mult[peak][np.argmax(np.abs(mult[peak]))]
+        lo, hi = grid[start], grid[stop - 1]
+        inside = np.any((p >= lo) & (p <= hi))
+        step = float(np.max(np.diff(grid[max(start - 1, 0):min(stop + 1, len(grid))]), initial=0.0))
+        zones.append({
+            "speed_rpm_from": float(rad_s_to_rpm(lo)),
+            "speed_rpm_to": float(rad_s_to_rpm(hi)),
+            "max_abs_floquet": float(abs(lead)),
+            "multiplier": [float(lead.real), float(lead.imag)],
+            "leaves_through": "-1" if lead.real < 0 else "+1",
+            "resolution_rpm": float(rad_s_to_rpm(step)),
+            "between_curve_points": not bool(inside),
+        })
+    return zones
 
 
 def _floquet(hb, system, branch, progress):
@@ -624,6 +667,14 @@ def run(config, args, out_dir) -> int:
         multipliers = [None] * len(branch)
     else:
         floquet, stable, stability_method, stability_warning, multipliers = _floquet(hb, system, branch, progress)
+
+    zones, zones_rule = [], "not scanned: the model is not linear (zones are the unstable curve points)"
+    if getattr(args, "no_stability", False):
+        zones_rule = "not scanned (--no-stability)"
+    elif model.is_linear and len(branch) > 1:
+        zones = unstable_zones(model, branch.p)
+        zones_rule = (f"exact monodromy on a grid {ZONE_SCAN_SUBDIVISIONS}x finer than the curve's points "
+                      "(linear model); zones narrower than the grid step can still be missed")
     t_stab = clock()
 
     look, follow, pd_rule = period_doubling_enabled(config, args, model, harmonics, nu)
@@ -714,6 +765,8 @@ def run(config, args, out_dir) -> int:
             "criterion": "hbgear.stability.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
             "max_abs_floquet is over the base period (nu mesh periods)",
             "unstable_points": int(np.sum(stable == 0)),
+            "unstable_zones": zones,
+            "unstable_zones_rule": zones_rule,
         },
         "period_doubling_rule": pd_rule,
         "period_doubling": pd_records,
@@ -747,6 +800,12 @@ def run(config, args, out_dir) -> int:
     located = [r for r in pd_records if "speed_rpm" in r]
     followed = [r for r in located if r["points"] > 0]
     pd_text = ""
+    zones = summary["stability"]["unstable_zones"]
+    zones_text = ""
+    if zones:
+        hidden = sum(z["between_curve_points"] for z in zones)
+        zones_text = (f"{len(zones)} unstable zone(s) by the fine exact scan"
+                      + (f", {hidden} between curve points" if hidden else "") + "; ")
     if located:
         speeds = ", ".join(f"{r['speed_rpm']:.6g}" for r in located)
         points = sum(r["points"] for r in followed)
@@ -755,7 +814,7 @@ def run(config, args, out_dir) -> int:
         f"frc: {len(branch)} points from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={harmonics}, nu={nu}); "
         f"peak DTE p2p {peak['dte_p2p_um']:.4g} um at {peak['speed_rpm']:.6g} rpm; "
         f"{len(summary['fold_speeds_rpm'])} folds; {summary['stability']['unstable_points']} unstable points; "
-        f"{pd_text}{summary['timings_s']['total']:.1f} s -> {out_dir}"
+        f"{zones_text}{pd_text}{summary['timings_s']['total']:.1f} s -> {out_dir}"
     )
     return 0
 
