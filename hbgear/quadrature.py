@@ -15,6 +15,8 @@ resolved too.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 __all__ = ["mesh_period_rule", "fourier_coefficients"]
@@ -23,12 +25,23 @@ _GL_ORDER = 8
 _GRADE_LEVELS = 14
 
 
+@lru_cache(maxsize=None)
+def _gauss_legendre() -> tuple[np.ndarray, np.ndarray]:
+    """The ``_GL_ORDER``-point Gauss-Legendre nodes and weights on [-1, 1] (computed once, read-only)."""
+    x, wx = np.polynomial.legendre.leggauss(_GL_ORDER)
+    x.flags.writeable = wx.flags.writeable = False
+    return x, wx
+
+
+@lru_cache(maxsize=256)
 def _unit_layout(sub_intervals: int, grade_levels: int) -> np.ndarray:
-    """Static sub-interval edges in [0, 1]: uniform, graded towards both ends."""
+    """Static sub-interval edges in [0, 1]: uniform, graded towards both ends (cached, read-only)."""
     uniform = np.linspace(0.0, 1.0, sub_intervals + 1)
     first = uniform[1]
     graded = first * 10.0 ** (-0.5 * np.arange(1, grade_levels + 1))
-    return np.unique(np.concatenate([uniform, graded, 1.0 - graded]))
+    edges = np.unique(np.concatenate([uniform, graded, 1.0 - graded]))
+    edges.flags.writeable = False
+    return edges
 
 
 def mesh_period_rule(breakpoints, max_order: int, xp=np):
@@ -51,7 +64,7 @@ def mesh_period_rule(breakpoints, max_order: int, xp=np):
     if xp is np:  # concrete breakpoints: sub-intervals in proportion to each interval's width
         return _proportional_rule(np.asarray(a), np.asarray(b), sub)
     unit = _unit_layout(sub, _GRADE_LEVELS)
-    x, wx = np.polynomial.legendre.leggauss(_GL_ORDER)
+    x, wx = _gauss_legendre()
     lo, hi = unit[:-1], unit[1:]
     unit_nodes = (0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * x[None]).ravel()
     unit_weights = (0.5 * (hi - lo)[:, None] * wx[None]).ravel()
@@ -63,7 +76,7 @@ def mesh_period_rule(breakpoints, max_order: int, xp=np):
 
 def _proportional_rule(a: np.ndarray, b: np.ndarray, sub: int):
     """The rule of :func:`mesh_period_rule` with ``ceil(sub * width)`` sub-intervals per interval."""
-    x, wx = np.polynomial.legendre.leggauss(_GL_ORDER)
+    x, wx = _gauss_legendre()
     nodes, weights = [], []
     for lo, hi in zip(a, b):
         width = hi - lo
