@@ -24,23 +24,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_duffing_tools import max_pair_distance  # same directory: on sys.path as a script and from run.py
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "examples" / "paper_table1.toml"
-
-
-def max_pair_distance(a, b, relative=False):
-    """Largest distance between two sets of multipliers paired one to one (the closest pairing)."""
-    from scipy.optimize import linear_sum_assignment
-
-    a, b = np.asarray(a), np.asarray(b)
-    if a.shape != b.shape:
-        return float("inf")
-    d = np.abs(a[:, None] - b[None, :])
-    if relative:
-        d = d / np.maximum(np.abs(b)[None, :], 1e-300)
-    rows, cols = linear_sum_assignment(d)
-    return float(d[rows, cols].max(initial=0.0))
 
 
 def run(quick=False, repeats=None):

@@ -154,10 +154,16 @@ def run_march(config, args, out_dir, model, cycles) -> int:
                      np.column_stack([rec.first_cycle + np.arange(rec.cycles), rec.dte_mean_um, rec.dte_rms_um,
                                       rec.dte_p2p_um]))
     last = _last_cycles(model, rec)
-    header, rows = timeseries_table(last)
+    _write_outputs(out_dir, last, summary, title=f"{rec.speed_rpm:.6g} rpm: last cycles of {rec.cycles} from the "
+                                                 f"static state (p2p growth {growth:.4f} per cycle)")
+    return 0
+
+
+def _write_outputs(out_dir, record, summary, title=None) -> None:
+    """`timeseries.csv`, `timeseries.png` and `summary.json` of a run (steady state or march)."""
+    header, rows = timeseries_table(record)
     write_csv_atomic(out_dir / "timeseries.csv", header, rows)
-    fig = plot_timeseries(last, title=f"{rec.speed_rpm:.6g} rpm: last cycles of {rec.cycles} from the static state "
-                                      f"(p2p growth {growth:.4f} per cycle)")
+    fig = plot_timeseries(record, title=title)
     try:
         save_figure_atomic(fig, out_dir / "timeseries.png", dpi=120)
     finally:
@@ -165,7 +171,6 @@ def run_march(config, args, out_dir, model, cycles) -> int:
 
         plt.close(fig)
     write_json_atomic(out_dir / "summary.json", summary)
-    return 0
 
 
 def run(config, args, out_dir) -> int:
@@ -197,16 +202,7 @@ def run(config, args, out_dir) -> int:
                                               "u_static_m": res.u_static},
         "config": config.to_dict(),
     }
-    header, rows = timeseries_table(res)
-    write_csv_atomic(out_dir / "timeseries.csv", header, rows)
-    fig = plot_timeseries(res)
-    try:
-        save_figure_atomic(fig, out_dir / "timeseries.png", dpi=120)
-    finally:
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
-    write_json_atomic(out_dir / "summary.json", summary)
+    _write_outputs(out_dir, res, summary)
     return 0
 
 
