@@ -489,13 +489,6 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
     a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
     mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
                             copy_tol=copy_tol, method=method)
-    if len({len(mu) for mu in mus}) == 1:  # one stacked sort (the usual case: no point lost a trivial)
-        mu = np.stack(mus)
-        mult = np.exp(2.0 * np.pi * mu)
-        order = np.argsort(-np.abs(mult), axis=1, kind="stable")
-        lam = np.take_along_axis(mu, order, axis=1) * w[:, None]
-        mult = np.take_along_axis(mult, order, axis=1)
-        return list(zip(lam, mult))
     out = []
     for mu, wk in zip(mus, w):
         mult = np.exp(2.0 * np.pi * mu)
