@@ -100,3 +100,11 @@ def test_unstable_zone_between_curve_points_is_found():
     inside = multipliers_linear(model, rpm_to_rad_s(np.array([zone["speed_rpm_from"], zone["speed_rpm_to"]])))
     assert all(np.max(np.abs(m)) > 1 + 1e-9 for m in inside)
     assert unstable_zones(model, rpm_to_rad_s(np.array([3000.0, 3100.0]))) == []
+
+
+def test_zone_labels_how_the_multiplier_leaves():
+    from hbgear.commands.frc import _leaves_through
+
+    assert _leaves_through(complex(-1.02, 0.0)) == "-1"
+    assert _leaves_through(complex(1.02, 0.0)) == "+1"
+    assert _leaves_through(complex(0.6, 0.9)) == "complex"  # a complex pair is neither +1 nor -1

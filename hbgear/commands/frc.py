@@ -287,14 +287,22 @@ def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
 ZONE_SCAN_SUBDIVISIONS = 6
 
 
+def _leaves_through(multiplier) -> str:
+    """``"-1"`` (period doubling), ``"+1"`` (divergence) or ``"complex"`` (a complex pair)."""
+    if abs(multiplier.imag) > 1e-6 * abs(multiplier):
+        return "complex"
+    return "-1" if multiplier.real < 0 else "+1"
+
+
 def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> list[dict]:
     """Speed intervals where a linear model's steady state is unstable, by exact monodromy on a grid
     `subdivisions` times finer than the curve's points (:func:`hbgear.stability.multipliers_linear`).
 
     A zone narrower than a curve step can lie between two stable points of the curve; this scan
     finds it to the grid's resolution. Each zone: ``speed_rpm_from``, ``speed_rpm_to`` (first and
-    last unstable grid speed), ``max_abs_floquet`` and the multiplier at its maximum (through -1
-    = period doubling, +1 = divergence), ``resolution_rpm`` (the grid step at the zone) and
+    last unstable grid speed), ``max_abs_floquet`` and the multiplier at its maximum, where it
+    leaves the unit circle (``"-1"``: period doubling, ``"+1"``: divergence, ``"complex"``),
+    ``resolution_rpm`` (the grid step at the zone) and
     ``between_curve_points`` (no point of the curve itself falls inside).
     """
     from ..stability import is_stable, multipliers_linear
@@ -318,7 +326,7 @@ def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIO
             "speed_rpm_to": float(rad_s_to_rpm(hi)),
             "max_abs_floquet": float(abs(lead)),
             "multiplier": [float(lead.real), float(lead.imag)],
-            "leaves_through": "-1" if lead.real < 0 else "+1",
+            "leaves_through": _leaves_through(lead),
             "resolution_rpm": float(rad_s_to_rpm(step)),
             "between_curve_points": not bool(inside),
         })
