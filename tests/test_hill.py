@@ -187,7 +187,7 @@ def test_copy_eigenvector_is_the_shifted_eigenvector():
 def test_real_negative_multiplier_copies_are_one_family():
     """In a period-doubling tongue the two copies a +- i/2 of one real negative multiplier are
     conjugates; however far truncation moves their multipliers apart, only one is taken, so
-    both real negative multipliers appear (a low-harmonic Hill used to take one twice)."""
+    both real negative multipliers appear."""
     m = gear("boundary.output='torques'", "friction.model='LTV'")
     omega = rpm_to_rad_s(26800.0)
     exact = st.multipliers_linear(m, omega)
