@@ -606,11 +606,12 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
     return records, rows, curves
 
 
-def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title, subharmonic=(), pd_points=()):
+def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title, subharmonic=(), pd_points=(), zones=()):
     """Figure: DTE RMS and peak-to-peak against speed; unstable points (red) and folds marked.
 
     `subharmonic`: ``nu = 2`` branches, arrays of frc.csv rows (columns as :data:`COLUMNS`, first 8),
-    drawn in another colour; `pd_points`: ``(speed_rpm, rms_um, p2p_um)`` of located period doublings.
+    drawn in another colour; `pd_points`: ``(speed_rpm, rms_um, p2p_um)`` of located period doublings;
+    `zones`: :func:`unstable_zones` records, shaded.
     """
     from matplotlib.figure import Figure
 
@@ -619,6 +620,9 @@ def plot_frc(speed_rpm, rms_um, p2p_um, stable, fold_rows, title, subharmonic=()
     unstable = stable == 0
     for ax, col, values, label in ((axes[0], 3, rms_um, "DTE RMS [um]"), (axes[1], 4, p2p_um, "DTE peak-to-peak [um]")):
         ax.plot(speed_rpm, values, color="k", lw=1.0, label="HB continuation (nu = 1)")
+        for k, zone in enumerate(zones):
+            ax.axvspan(zone["speed_rpm_from"], zone["speed_rpm_to"], color="tab:red", alpha=0.15, lw=0,
+                       label="unstable zone (exact scan)" if k == 0 else None)
         if np.any(unstable):
             ax.plot(speed_rpm[unstable], values[unstable], "o", ms=3, color="tab:red", label="unstable")
         if len(fold_rows):
@@ -740,7 +744,7 @@ def run(config, args, out_dir) -> int:
             j = rec["bracket_rows"][0]
             sol = PeriodicSolution.from_z(model, rpm_to_rad_s(rec["speed_rpm"]), branch.z[j], hb).summary()
             pd_points.append((rec["speed_rpm"], sol["dte_rms_um"], sol["dte_p2p_um"]))
-    fig = plot_frc(speed_rpm, table[:, 3], table[:, 4], stable, folds, title, pd_curves, pd_points)
+    fig = plot_frc(speed_rpm, table[:, 3], table[:, 4], stable, folds, title, pd_curves, pd_points, zones)
     save_figure_atomic(fig, out_dir / "frc.png", dpi=120)
     t_out = clock()
 
