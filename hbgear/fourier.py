@@ -13,8 +13,6 @@ base period (:func:`synthesize`, :func:`project`, real FFTs).
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 __all__ = [
@@ -43,56 +41,45 @@ def derivative_matrix(harmonics: int, omega, xp=np):
     return omega * xp.asarray(d)
 
 
-@lru_cache(maxsize=64)
-def _convolution_gather(harmonics: int):
-    """Static gather tables for :func:`convolution_matrix`: entry ``(k, l)`` of the real matrix is
-    ``sum_j factor[j, k, l] * v[index[j, k, l]]`` with ``v = [Re p_0 .. Re p_2H, Im p_0 .. Im p_2H]``."""
-    size = basis_size(harmonics)
-    orders = 2 * harmonics + 1
-    k = np.zeros(size, dtype=int)
-    kind = np.zeros(size, dtype=int)  # 0: constant, 1: cosine, 2: sine
-    k[1::2] = k[2::2] = np.arange(1, harmonics + 1)
-    kind[1::2], kind[2::2] = 1, 2
-    row_k, col_k = np.meshgrid(k, k, indexing="ij")
-    row_kind, col_kind = np.meshgrid(kind, kind, indexing="ij")
-    adiff, sdiff, ksum = np.abs(row_k - col_k), np.sign(row_k - col_k), row_k + col_k
-    re_d, im_d, re_s, im_s = adiff, orders + adiff, ksum, orders + ksum
-    index = np.zeros((2, size, size), dtype=int)
-    factor = np.zeros((2, size, size))
-
-    def put(mask, i0, f0, i1=None, f1=0.0):
-        index[0][mask], factor[0][mask] = np.broadcast_to(i0, mask.shape)[mask], np.broadcast_to(f0, mask.shape)[mask]
-        if i1 is not None:
-            index[1][mask], factor[1][mask] = np.broadcast_to(i1, mask.shape)[mask], np.broadcast_to(f1, mask.shape)[mask]
-
-    # p_{k-l} = conj p_{l-k}: Im p_{k-l} = sign(k-l) Im p_|k-l|; p_{k+l}
-    put((row_kind == 1) & (col_kind == 1), re_d, 1.0, re_s, 1.0)  # cos-cos: Re p_{k-l} + Re p_{k+l}
-    put((row_kind == 1) & (col_kind == 2), im_d, sdiff, im_s, -1.0)  # cos-sin: Im p_{k-l} - Im p_{k+l}
-    put((row_kind == 2) & (col_kind == 1), im_d, -sdiff, im_s, -1.0)  # sin-cos: -(Im p_{k-l} + Im p_{k+l})
-    put((row_kind == 2) & (col_kind == 2), re_d, 1.0, re_s, -1.0)  # sin-sin: Re p_{k-l} - Re p_{k+l}
-    put((row_kind == 0) & (col_kind == 1), col_k, 1.0)  # row a_0: Re p_l, -Im p_l
-    put((row_kind == 0) & (col_kind == 2), orders + col_k, -1.0)
-    put((row_kind == 1) & (col_kind == 0), row_k, 2.0)  # column a_0: 2 Re p_k, -2 Im p_k
-    put((row_kind == 2) & (col_kind == 0), orders + row_k, -2.0)
-    put((row_kind == 0) & (col_kind == 0), 0, 1.0)  # Re p_0
-    return index, factor
-
-
 def convolution_matrix(p, harmonics: int, xp=np):
     """Real Galerkin matrix of multiplication by a periodic coefficient.
 
     **Arguments:** `p`: complex coefficients ``p_m``, ``m = 0 .. 2H`` on the base frequency
-    (shape ``(..., 2H+1)``, leading axes batched).
+    (shape ``(..., 2H+1)``, leading axes batched; ``Im p_0`` is ignored).
 
     **Returns:** shape ``(..., 2H+1, 2H+1)``, ``T`` with ``coeffs(p x) = T @ coeffs(x)``: with
-    ``p_{-m} = conj p_m``, cos-cos ``Re p_{k-l} + Re p_{k+l}``, cos-sin ``Im p_{k-l} - Im p_{k+l}``,
-    sin-cos ``-(Im p_{k-l} + Im p_{k+l})``, sin-sin ``Re p_{k-l} - Re p_{k+l}``, row ``a_0``
-    ``(Re p_0, Re p_l, -Im p_l)``, column ``a_0`` ``(2 Re p_k, -2 Im p_k)``; two gathers.
+    ``p_{-m} = conj p_m``, the complex Toeplitz ``P_kl = p_{k-l}`` and Hankel ``Q_kl = p_{k+l}``
+    (``k, l = 0..H``), cos-cos ``Re(P + Q)``, cos-sin ``Im(P - Q)``, sin-cos ``-Im(P + Q)``,
+    sin-sin ``Re(P - Q)``; the row of ``a_0`` halved (``Re p_0``, ``Re p_l``, ``-Im p_l``).
     """
-    index, factor = _convolution_gather(harmonics)
-    p = xp.asarray(p)
-    v = xp.concatenate([xp.real(p), xp.imag(p)], axis=-1)
-    return v[..., index[0]] * factor[0] + v[..., index[1]] * factor[1]
+    p = xp.asarray(p)[..., : 2 * harmonics + 1]
+    n = harmonics + 1
+    re, im = xp.real(p), xp.imag(p)
+    zero = 0.0 * im[..., :1]
+    # Toeplitz from [p_H .. p_1, p_0, conj p_1 .. conj p_H] with a stride one shorter than its
+    # period (each row starts one entry earlier); Hankel from p_0 .. p_2H with a stride one longer
+    rev = lambda a: a[..., n - 1 : 0 : -1]  # noqa: E731
+    t_re = _toeplitz(xp.concatenate([rev(re), re[..., :1], re[..., 1:n]], axis=-1), n, xp)
+    t_im = _toeplitz(xp.concatenate([rev(im), zero, -im[..., 1:n]], axis=-1), n, xp)
+    h_re, h_im = _hankel(re, n, xp), _hankel(im, n, xp)
+    blocks = xp.stack([xp.stack([t_re + h_re, t_im - h_im], axis=-1),
+                       xp.stack([-t_im - h_im, t_re - h_re], axis=-1)], axis=-3)  # (..., k, cos|sin, l, cos|sin)
+    full = xp.reshape(blocks, p.shape[:-1] + (2 * n, 2 * n))  # [a_0, b_0, a_1, b_1, ...]: drop b_0
+    full = xp.concatenate([0.5 * full[..., :1, :], full[..., 2:, :]], axis=-2)
+    return xp.concatenate([full[..., :1], full[..., 2:]], axis=-1)
+
+
+def _toeplitz(w, n: int, xp):
+    """``T_kl = w[n - 1 - k + l]``, ``k, l < n``, from ``w`` of length ``2n - 1``."""
+    flat = xp.tile(w, (1,) * (w.ndim - 1) + (n + 1,))
+    rows = flat[..., n - 1 : n - 1 + n * (2 * n - 2)]
+    return xp.reshape(rows, w.shape[:-1] + (n, 2 * n - 2))[..., :n]
+
+
+def _hankel(u, n: int, xp):
+    """``Q_kl = u[k + l]``, ``k, l < n``, from ``u`` of length ``2n - 1``."""
+    flat = xp.tile(u, (1,) * (u.ndim - 1) + (n + 1,))
+    return xp.reshape(flat[..., : 2 * n * n], u.shape[:-1] + (n, 2 * n))[..., :n]
 
 
 def coefficients_to_real(f, harmonics: int, xp=np):
