@@ -329,7 +329,9 @@ class HarmonicBalance:
 
         ``P diag(g) E`` is the convolution matrix of the ``N``-point DFT coefficients of ``g``
         exactly when ``N > 4H`` (no index wraps), so the Jacobian costs ``2 ndof`` pointwise
-        directional derivatives and FFTs instead of ``ndof (2H+1)`` tangents through the AFT.
+        directional derivatives and FFTs instead of ``ndof (2H+1)`` tangents through the AFT;
+        ``ndof`` when the system declares ``nonlinear_force_uses_displacement = False``
+        (``T_q = 0``, e.g. friction that depends on the velocities only).
         """
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
@@ -342,11 +344,16 @@ class HarmonicBalance:
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
 
         eye = jnp.eye(n)
-        dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
         dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[j][:, None], qd.shape),))[1] for j in range(n)], axis=1)
-        coeff = jnp.fft.rfft(jnp.stack([dq, dv]), axis=-1)[..., : 2 * H + 1] / N  # (2, n, n, 2H+1)
-        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (2, n, n, B, B)
-        return self._flatten(blocks[0]), self._flatten(blocks[1]), jnp.kron(jnp.eye(n), d)
+        derivatives = [dv]
+        uses_q = getattr(system, "nonlinear_force_uses_displacement", True)
+        if uses_q:
+            dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
+            derivatives.insert(0, dq)
+        coeff = jnp.fft.rfft(jnp.stack(derivatives), axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
+        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, n, B, B)
+        t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
+        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
 
     def _times_derivative(self, a, system, p):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times

@@ -9,9 +9,11 @@ period ``2 pi / w_exc(p)``, ``p`` the scalar parameter being varied (a speed, a 
   is pinned to 0 and replaced by a constant force unknown ``extra`` entering ``Q``),
 - ``mass_matrix(p, xp)``, ``excitation_frequency(p)`` [rad/s], ``breakpoints(p, xp)``,
 - ``force(s, q, qd, p, part, extra, xp)``, ``displacement_scale``, ``force_scale``;
-- optional speed-ups (both default False): ``coefficients_independent_of_parameter`` (``M`` and
+- optional speed-ups (default False): ``coefficients_independent_of_parameter`` (``M`` and
   the periodic stiffness and damping of ``Q_lin`` do not depend on ``p``) and
-  ``forcing_affine_in_frequency`` (``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``).
+  ``forcing_affine_in_frequency`` (``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``);
+  and (default True) ``nonlinear_force_uses_displacement`` (False: ``Q_nl`` depends on ``q'``
+  only, so its Jacobian has no displacement blocks).
 
 Systems are JAX pytrees, so changing their float parameters never triggers recompilation.
 """
@@ -89,6 +91,14 @@ class GearSystem:
             return False
         m = self.model
         return not m.friction_is_linear or m.friction.name in ("none", "coulomb")
+
+    @property
+    def nonlinear_force_uses_displacement(self) -> bool:
+        """False when ``Q_nl`` depends on the velocities only: NLTV friction in formulation A
+        (loads quasi-static, ``mu`` from the sliding and rolling velocities) without backlash.
+        Backlash (the dead zone of ``delta``) and formulation-B loads (``F_mesh``) use ``q``."""
+        m = self.model
+        return not m.mesh_is_linear or (not m.friction_is_linear and m.formulation == "B")
 
     @property
     def displacement_scale(self):

@@ -65,10 +65,18 @@ def test_ltv_newton_equals_direct_kh_solve():
     np.testing.assert_allclose(solution.coefficients.ravel(), direct, rtol=1e-10, atol=1e-18)
 
 
-def test_jax_jacobian_equals_finite_differences():
-    """NLTV (arctan, formulation B, spring): dR/dz and dR/dp against central differences."""
-    model = model_with("friction.model=NLTV", "friction.law=arctan", "friction.formulation=B", "mesh.damping_ratio=0.05")
+@pytest.mark.parametrize("overrides, uses_q", [
+    (("friction.model=NLTV", "friction.formulation=B"), True),
+    (("friction.model=NLTV", "friction.formulation=A"), False),  # the Jacobian skips the q-blocks
+    (("friction.model=NLTV", "friction.formulation=A", "mesh.backlash_um=20"), True),
+    (("friction.model=LTV", "friction.formulation=B", "mesh.backlash_um=20"), True),
+], ids=["NLTV-B", "NLTV-A", "NLTV-A-backlash", "LTV-B-backlash"])
+def test_jax_jacobian_equals_finite_differences(overrides, uses_q):
+    """Nonlinear models (arctan, spring): dR/dz and dR/dp against central differences, whatever
+    the system declares about ``Q_nl``'s dependence on ``q`` (a wrong False fails here)."""
+    model = model_with("friction.law=arctan", "mesh.damping_ratio=0.05", *overrides)
     hb, system, omega = HarmonicBalance(2, 6, 1, 64), GearSystem(model), rpm_to_rad_s(3000)
+    assert system.nonlinear_force_uses_displacement is uses_q
     z = np.random.default_rng(4).normal(size=hb.size) * 0.3
     z[0] = 1.0
     _, jz, jp = hb.residual_and_jacobians(jnp.asarray(z), omega, system)
