@@ -286,64 +286,64 @@ def _python_corrector(residual_and_jacobians, residual, scale, size):
     return correct
 
 
-def _jit_corrector(residual_and_jacobians, residual, scale, size):
-    """The same corrector as :func:`_python_corrector` as one compiled JAX function.
+#: Regular steps one call of the compiled corrector may take in a row (:meth:`_Compiled.segment`).
+SEGMENT_POINTS = 32
 
-    One loop turn = one ``(R, R_z, R_p)`` evaluation at a candidate; ``mode`` says what the
-    candidate is: 0 the predictor (taken as it is), 1 a full Newton step (taken if it decreases
-    ``max |R|``, else a residual-only backtracking gives the next candidate), 2 the result of a
-    backtracking (taken as it is). ``status``: -1 running, 0 converged, 1 non-finite residual,
-    2 singular bordered Jacobian, 3 not converged in ``max_iter``. So each callable is traced
-    once, whatever the number of iterations.
+
+def _jit_corrector(residual_and_jacobians, residual, size):
+    """The corrector of :func:`_python_corrector`, and the regular continuation steps around it,
+    as one compiled JAX function (``advance``), and ``no_factor`` (an unusable chord LU).
+
+    One corrector loop turn = one ``(R, R_z, R_p)`` evaluation at a candidate; ``mode`` says
+    what the candidate is: 0 the predictor (taken as it is), 1 a full Newton step (taken if it
+    decreases ``max |R|``, else a residual-only backtracking gives the next candidate), 2 the
+    result of a backtracking (taken as it is), 3 a chord step. ``status``: -1 running, 0
+    converged, 1 non-finite residual, 2 singular bordered Jacobian, 3 not converged in
+    ``max_iter``. Each callable is traced once, whatever the number of iterations or steps; the
+    parameter scale ``p_ref`` is an argument (a new range does not recompile).
     """
     import jax
     import jax.numpy as jnp
 
-    # The callables are traced in (z, p) only: whatever they close over stays outside the
-    # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
-    # (Evaluating their constant sub-expressions at trace time instead, with
-    # jax.ensure_compile_time_eval, made the compilation ~4x slower for the gear pair.)
-    def evaluate(y):
-        r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
-        jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
-                               scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
-        return jnp.asarray(r, dtype=float).reshape(size), jac
-
-    def residual_of(y):
-        return jnp.asarray(residual(y[:-1], y[-1] * scale), dtype=float).reshape(size)
-
-    def norm_of(y):
-        return jnp.max(jnp.abs(residual_of(y)))
-
-    unit_last = jnp.zeros(size + 1).at[-1].set(1.0)
-
-    def tangent(jac, previous):
-        """Unit tangent from ``[J; previous] t = e``, and that LU (``ok`` = it is usable)."""
-        lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([jac, previous[None]], axis=0))
-        raw = jax.scipy.linalg.lu_solve((lu, piv), unit_last)
-        ok = jnp.all(jnp.isfinite(raw))
-        t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(jac)[2][-1])
-        t = t / jnp.linalg.norm(t)
-        return jnp.where(t @ previous >= 0, t, -t), (lu, piv, raw, previous, ok)
+    unit_last = np.zeros(size + 1)
+    unit_last[-1] = 1.0
 
     def no_factor(previous, xp=jnp):
         return (xp.zeros((size + 1, size + 1)), xp.zeros(size + 1, np.int32), xp.zeros(size + 1), previous,
                 xp.asarray(False))
 
-    @jax.jit
-    def correct(y_pred, row, target, previous, max_iter, tolerance, factor):
-        """Returns ``(y, max|R|, iterations, status, tangent, factor)``; `factor` is the LU
-        ``(lu, piv, v, previous_f, usable)`` of the last converged point, for the chord mode.
+    def attempt(y_pred, row, target, previous, max_iter, tolerance, factor, scale):
+        """One corrector run from ``y_pred`` on ``R(y) = 0``, ``row . y = target``:
+        ``(y, max|R|, Newton iterations, chord iterations, status, tangent, factor)``; `factor`
+        is the LU ``(lu, piv, v, previous_f, usable)`` of the last converged point, for the chord
+        mode, and comes back as the LU at ``y`` when converged.
 
-        Modes of a loop turn (``mode``): 0 evaluate ``(R, R_z, R_p)`` at the candidate and take
-        it, 1 a full Newton step was tried (taken if it decreases ``max |R|``, else backtracking),
-        2 a backtracking result, 3 a chord step (residual only). Chord: modified Newton with
-        ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``: ``B = A + e d^T``,
-        ``d = row - previous_f``, so ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``,
-        ``v = A^-1 e`` (the unnormalised tangent). Each chord step must halve ``max |R|``; on
-        convergence one mode-0 turn evaluates the Jacobian there (for the tangent), on failure
-        the Newton iteration restarts from the predictor.
+        Chord: modified Newton with ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``:
+        ``B = A + e d^T``, ``d = row - previous_f``, so ``B^-1 b = u - v (d . u) / (1 + d . v)``,
+        ``u = A^-1 b``, ``v = A^-1 e`` (the unnormalised tangent). Each chord step must halve
+        ``max |R|``; on convergence one mode-0 turn evaluates the Jacobian there (for the
+        tangent), on failure the Newton iteration restarts from the predictor.
         """
+        # The callables are traced in (z, p) only: whatever they close over stays outside the
+        # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
+        def evaluate(y):
+            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
+            jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
+                                   scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
+            return jnp.asarray(r, dtype=float).reshape(size), jac
+
+        def residual_of(y):
+            return jnp.asarray(residual(y[:-1], y[-1] * scale), dtype=float).reshape(size)
+
+        def tangent(jac, previous):
+            """Unit tangent from ``[J; previous] t = e``, and that LU (``ok`` = it is usable)."""
+            lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([jac, previous[None]], axis=0))
+            raw = jax.scipy.linalg.lu_solve((lu, piv), unit_last)
+            ok = jnp.all(jnp.isfinite(raw))
+            t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(jac)[2][-1])
+            t = t / jnp.linalg.norm(t)
+            return jnp.where(t @ previous >= 0, t, -t), (lu, piv, raw, previous, ok)
+
         lu, piv, v, previous_f, usable = factor
         d = row - previous_f
         denominator = 1.0 + d @ v
@@ -407,7 +407,7 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
 
                 def ls_body(c):
                     alpha = 0.5 * c[0]
-                    n = norm_of(y + alpha * step)
+                    n = jnp.max(jnp.abs(residual_of(y + alpha * step)))
                     return alpha, jnp.isfinite(n) & (n < (1 - 1e-4 * alpha) * norm)
 
                 alpha, _ = jax.lax.while_loop(ls_cond, ls_body, (jnp.asarray(1.0, float), jnp.asarray(False)))
@@ -428,39 +428,141 @@ def _jit_corrector(residual_and_jacobians, residual, scale, size):
                                      lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
         return s["y"], s["norm"], s["it"], s["chord_it"], s["status"], t, new_factor
 
-    return correct, no_factor
+    @jax.jit
+    def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
+                controls):
+        """Corrector runs from ``y_pred`` and then, while each is a regular continuation step from
+        ``(y0, t0, ds0)`` and fewer than `budget` were taken, the next predictor-corrector steps
+        with the step-size control of :func:`continuation` (`controls` = ``ds_min, ds_max,
+        max_angle_deg, growth, target_iterations, max_parameter_step, p_end, direction, p_start``
+        scaled). Regular: converged, accepted (offset, angle), no fold, not at or past ``p_end``,
+        not back past ``p_start``.
+
+        **Returns:** ``(taken, points, (y, t, ds), factor, pending)``: `taken` regular steps,
+        `points` their ``(y, t, max|R|, iterations, work, ds)`` stacked (``SEGMENT_POINTS`` rows,
+        the first `taken` valid), the state after them, the chord LU, and ``pending`` = ``[y,
+        tangent, max|R|, Newton iterations, chord iterations, status, valid]`` of the last
+        corrector run when it was not a regular step (for the caller to decide on; one array:
+        one transfer). With ``budget = 0`` it is one plain corrector run.
+        """
+        ds_min, ds_max, max_angle, growth, target_work, max_dp, p_end, direction, p_start = controls
+        m = size + 1
+        rows = SEGMENT_POINTS
+        state = dict(k=jnp.asarray(0, jnp.int32), y=y0, t=t0, ds=ds0, factor=factor, y_pred=y_pred, row=row,
+                     target=target, previous=previous, done=jnp.asarray(False), pending=jnp.zeros(2 * m + 5),
+                     y_out=jnp.zeros((rows, m)), t_out=jnp.zeros((rows, m)), info=jnp.zeros((rows, 4)))
+
+        def turn(s):
+            f = s["factor"]
+            y, norm, newton_it, chord_it, status, t, new_factor = attempt(
+                s["y_pred"], s["row"], s["target"], s["previous"], max_iter, tolerance,
+                f[:4] + (f[4] & use_chord,), scale)
+            converged = status == 0
+            factor = jax.tree.map(lambda a, b: jnp.where(converged, a, b), new_factor, s["factor"])
+            angle = jnp.degrees(jnp.arccos(jnp.clip(t @ s["t"], -1.0, 1.0)))
+            offset = jnp.linalg.norm(y - s["y_pred"])
+            ds = s["ds"]
+            regular = (converged & ~((offset > ds) & (ds > ds_min)) & ~((angle > max_angle) & (ds > ds_min))
+                       & (t[-1] * s["t"][-1] >= 0) & ((y[-1] - p_end) * direction < 0)
+                       & ~(((y[-1] - p_start) * direction < 0) & ((s["y"][-1] - p_start) * direction >= 0))
+                       & (s["k"] < budget))
+            work = newton_it + CHORD_ITERATION_WORK * chord_it
+            # step-size control and the parameter-step limit, as in continuation()
+            gain = target_work / jnp.maximum(work, 1.0)
+            gain = jnp.where(angle > 0, jnp.minimum(gain, max_angle / (2 * jnp.maximum(angle, 1e-300))), gain)
+            ds_next = jnp.minimum(ds_max, jnp.maximum(ds_min, ds * jnp.minimum(growth, jnp.maximum(0.5, gain))))
+            ds_next = jnp.where(jnp.abs(t[-1]) * ds_next > max_dp, jnp.maximum(ds_min, max_dp / jnp.abs(t[-1])), ds_next)
+            y_next = y + ds_next * t
+            k = s["k"]
+            info = jnp.stack([norm, (newton_it + chord_it).astype(float), work, ds])
+            pending = jnp.concatenate([y, t, jnp.stack([norm, newton_it.astype(float), chord_it.astype(float),
+                                                        status.astype(float), 1.0])])
+            taken = dict(k=k + 1, y=y, t=t, ds=ds_next, factor=factor, y_pred=y_next, row=t, target=t @ y_next,
+                         previous=t, done=k + 1 >= budget, pending=s["pending"],
+                         y_out=s["y_out"].at[k].set(y), t_out=s["t_out"].at[k].set(t), info=s["info"].at[k].set(info))
+            refused = dict(s, done=jnp.asarray(True), pending=pending, factor=factor)
+            return jax.tree.map(lambda a, b: jnp.where(regular, a, b), taken, refused)
+
+        s = jax.lax.while_loop(lambda s: ~s["done"], turn, state)
+        return s["k"], (s["y_out"], s["t_out"], s["info"]), (s["y"], s["t"], s["ds"]), s["factor"], s["pending"]
+
+    return advance, no_factor
 
 
-def _jit_call(compiled, chord):
-    """One run's corrector on the compiled function; with `chord`, it keeps the LU of the last
-    converged point for the next call."""
-    import jax
+class _Compiled:
+    """One run's use of the compiled corrector: a plain corrector call (``self(...)``, the
+    interface of :func:`_python_corrector`) or a :meth:`segment` of regular steps; with `chord`
+    it keeps the LU of the last converged point for the next call."""
 
-    correct, no_factor = compiled
-    last = [None]
-    empty = None
+    def __init__(self, compiled, chord: bool, scale: float, controls=None):
+        import jax
 
-    def call(y_pred, row, target, previous, max_iter, tolerance):
-        nonlocal empty
-        if chord and last[0] is not None:
-            factor = last[0]
-        else:  # "no factorisation": device-resident zeros made once, only `previous` changes
-            empty = no_factor(jax.numpy.asarray(previous, dtype=float)) if empty is None else empty
-            factor = empty[:3] + (np.asarray(previous, dtype=float), empty[4])
-        out = correct(y_pred, row, float(target), previous, int(max_iter), float(tolerance), factor)
-        y, norm, newton_it, chord_it, status, t = jax.device_get(out[:6])
-        status, norm, it = int(status), float(norm), int(newton_it) + int(chord_it)
+        self._jax = jax
+        self.advance, no_factor = compiled
+        self.chord, self.scale = bool(chord), float(scale)
+        self.controls = np.zeros(9) if controls is None else np.asarray(controls, dtype=float)
+        self.last = None
+        self.empty = None
+        self.no_factor = no_factor
+
+    def _factor(self, previous):
+        if self.chord and self.last is not None:
+            return self.last
+        # "no factorisation": device-resident zeros made once, only `previous` changes
+        if self.empty is None:
+            self.empty = self.no_factor(self._jax.numpy.asarray(previous, dtype=float))
+        return self.empty[:3] + (np.asarray(previous, dtype=float), self.empty[4])
+
+    def _run(self, y_pred, row, target, previous, max_iter, tolerance, y0, t0, ds0, budget):
+        return self.advance(y_pred, row, float(target), previous, int(max_iter), float(tolerance),
+                            self._factor(previous), self.scale, self.chord, y0, t0, float(ds0), int(budget),
+                            self.controls)
+
+    def _result(self, pending, factor, max_iter):
+        """A corrector run's packed outcome -> _Point | _Failure (keeps the LU if converged)."""
+        m = (pending.size - 5) // 2
+        y, t = pending[:m], pending[m : 2 * m]
+        norm, newton_it, chord_it, status = float(pending[-5]), int(pending[-4]), int(pending[-3]), int(pending[-2])
         if status == 0:
-            last[0] = out[6]
-            return _Point(np.array(y), norm, np.array(t), it, int(newton_it) + CHORD_ITERATION_WORK * int(chord_it))
+            self.last = factor
+            return _Point(y, norm, t, newton_it + chord_it, newton_it + CHORD_ITERATION_WORK * chord_it)
         if status == 3:
             return _Failure(f"not converged in {max_iter} corrector iterations", norm, int(max_iter))
-        return _Failure(_FAILURES[status], norm, int(it))
+        return _Failure(_FAILURES[status], norm, newton_it + chord_it)
 
-    return call
+    def __call__(self, y_pred, row, target, previous, max_iter, tolerance):
+        y_pred = np.asarray(y_pred, dtype=float)
+        _, _, _, factor, pending = self._run(y_pred, row, target, previous, max_iter, tolerance, y_pred,
+                                             np.asarray(row, dtype=float), 0.0, 0)
+        return self._result(np.asarray(self._jax.device_get(pending)), factor, max_iter)
+
+    def segment(self, y, t, ds, max_iter, tolerance, budget):
+        """Up to `budget` regular steps from ``(y, t, ds)`` in one call.
+
+        **Returns:** ``(points, pending, (y, t, ds))``: the regular points as ``(y, t, max|R|,
+        iterations, ds)``, then the outcome of the corrector run that was not a regular step
+        (``None`` if the budget ran out first) and the state it started from.
+        """
+        y_pred = y + ds * t
+        taken, (y_out, t_out, info), state, factor, pending = self._run(
+            y_pred, t, t @ y_pred, t, max_iter, tolerance, y, t, ds, min(budget, SEGMENT_POINTS))
+        taken, y_out, t_out, info, state, pending = self._jax.device_get((taken, y_out, t_out, info, state, pending))
+        points = [(y_out[i], t_out[i], float(info[i, 0]), int(info[i, 1]), float(info[i, 3])) for i in range(int(taken))]
+        y, t, ds = np.asarray(state[0]), np.asarray(state[1]), float(state[2])
+        if pending[-1] == 0:  # the budget ran out on regular steps
+            self.last = factor
+            return points, None, (y, t, ds)
+        if taken:  # the factor of the last regular point, unless the pending run converged
+            self.last = factor
+        return points, self._result(np.asarray(pending), factor, max_iter), (y, t, ds)
 
 
-_JIT_CACHE: dict = {}  # (residual_and_jacobians, residual, p_ref, size) -> compiled corrector
+def _jit_call(compiled, chord, scale=1.0, controls=None):
+    """The compiled corrector of one run (see :class:`_Compiled`)."""
+    return _Compiled(compiled, chord, scale, controls)
+
+
+_JIT_CACHE: dict = {}  # (residual_and_jacobians, residual, size) -> compiled corrector
 
 
 def _angle_deg(a, b):
@@ -512,12 +614,15 @@ def continuation(
     python_correct = _python_corrector(residual_and_jacobians, residual, scale, size)
     corrector = [python_correct]
     if m.jit_step:
-        key = (residual_and_jacobians, residual, scale, size)
+        key = (residual_and_jacobians, residual, size)
         if key not in _JIT_CACHE:  # the same callables again (e.g. repeated runs): no new trace
             if len(_JIT_CACHE) >= 8:
                 _JIT_CACHE.pop(next(iter(_JIT_CACHE)))
-            _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, scale, size)
-        corrector[0] = _jit_call(_JIT_CACHE[key], m.chord)
+            _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, size)
+        controls = (m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations,
+                    math.inf if m.max_parameter_step is None else m.max_parameter_step,
+                    p_end / scale, direction, p0 / scale)
+        corrector[0] = _jit_call(_JIT_CACHE[key], m.chord, scale, controls)
 
     def correct(y_pred, row, target, max_iter, previous, tol=tolerance):
         """Newton on ``R(y) = 0``, ``row . y = target``; a _Point (with the tangent oriented
@@ -527,12 +632,15 @@ def continuation(
         try:
             return corrector[0](y_pred, row, target, previous, max_iter, tol)
         except Exception as error:  # not traceable by JAX: the Python corrector, same algorithm
-            warnings.warn(f"jit_step: the residual functions could not be compiled ({type(error).__name__}: "
-                          f"{str(error).splitlines()[0] if str(error) else ''}); using the Python corrector",
-                          RuntimeWarning, stacklevel=3)
-            corrector[0] = python_correct
-            _JIT_CACHE.pop((residual_and_jacobians, residual, scale, size), None)
+            fall_back(error)
             return python_correct(y_pred, row, target, previous, max_iter, tol)
+
+    def fall_back(error):
+        warnings.warn(f"jit_step: the residual functions could not be compiled ({type(error).__name__}: "
+                      f"{str(error).splitlines()[0] if str(error) else ''}); using the Python corrector",
+                      RuntimeWarning, stacklevel=4)
+        corrector[0] = python_correct
+        _JIT_CACHE.pop((residual_and_jacobians, residual, size), None)
 
     # -- storage -----------------------------------------------------------------------------
     rows = {k: [] for k in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds")}
@@ -610,9 +718,28 @@ def continuation(
             tried = []
             if m.max_parameter_step is not None and abs(t[-1]) * ds > m.max_parameter_step:
                 ds = max(m.ds_min, m.max_parameter_step / abs(t[-1]))
+            pending = None
+            if isinstance(corrector[0], _Compiled):  # regular steps in one compiled call
+                try:
+                    points, pending, (y, t, ds) = corrector[0].segment(
+                        y, t, ds, m.max_corrector_iterations, tolerance, max_points - len(rows["p"]))
+                except Exception as error:  # not traceable by JAX: the Python corrector from here
+                    fall_back(error)
+                    points = []
+                for y_new, t_new, r_norm, iterations, ds_used in points:
+                    store(y_new, PointKind.REGULAR, iterations, r_norm, t_new, ds_used)
+                    if stopped[0]:
+                        break
+                if points and bar is not None:
+                    _advance_bar(bar, y, scale, p0, p_end, len(rows["p"]), ds)
+                if stopped[0] or pending is None:
+                    continue  # stopped, at max_points, or the next segment
             while True:
                 y_pred = y + ds * t
-                result = correct(y_pred, t, t @ y_pred, m.max_corrector_iterations, t)
+                if pending is not None:  # the segment's last corrector run, from this predictor
+                    result, pending = pending, None
+                else:
+                    result = correct(y_pred, t, t @ y_pred, m.max_corrector_iterations, t)
                 if isinstance(result, _Point):
                     t_new = result.tangent
                     angle = _angle_deg(t_new, t)
@@ -683,13 +810,17 @@ def continuation(
             ds = min(m.ds_max, max(m.ds_min, ds * min(m.growth, max(0.5, factor))))
             y, t = y_new, t_new
             if bar is not None:
-                bar.n = round(100 * min(1.0, max(0.0, (y[-1] * scale - p0) / (p_end - p0))), 1)
-                bar.set_postfix(p=f"{y[-1] * scale:.6g}", points=len(rows["p"]), ds=f"{ds:.2g}", refresh=False)
-                bar.refresh()
+                _advance_bar(bar, y, scale, p0, p_end, len(rows["p"]), ds)
     finally:
         if bar is not None:
             bar.close()
     return finish(status, detail)
+
+
+def _advance_bar(bar, y, scale, p0, p_end, points, ds):
+    bar.n = round(100 * min(1.0, max(0.0, (y[-1] * scale - p0) / (p_end - p0))), 1)
+    bar.set_postfix(p=f"{y[-1] * scale:.6g}", points=points, ds=f"{ds:.2g}", refresh=False)
+    bar.refresh()
 
 
 class IllinoisBracket(NamedTuple):

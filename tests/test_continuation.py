@@ -279,7 +279,8 @@ def test_jit_step_failures_and_fallback():
     python = continuation(rj, r, [0.0], 0.0, 2.0, PseudoArclength(**opts))
     assert jitted.status == python.status == Status.STEP_TOO_SMALL
     assert "non-finite" in jitted.message and jitted.message == python.message
-    assert np.array_equal(jitted.p, python.p)
+    # the same steps; the compiled segment forms y + ds t in XLA (1 ulp from numpy's rounding)
+    assert len(jitted) == len(python) and np.max(np.abs(jitted.p - python.p)) <= 1e-15
 
     def circle_rj(z, p):  # numpy only: jit_step falls back to the Python corrector
         return np.array([z[0] ** 2 + p**2 - 1]), np.array([[2 * z[0]]]), np.array([2 * p])
@@ -299,7 +300,7 @@ def _correctors(hb, system, scale):
     from hbgear.continuation import _jit_corrector, _python_corrector
 
     rj, r = problem(hb, system)
-    compiled = _jit_corrector(rj, r, scale, hb.size)
+    compiled = _jit_corrector(rj, r, hb.size)
     return _python_corrector(rj, r, scale, hb.size), compiled
 
 
@@ -314,7 +315,7 @@ def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
     i = len(duffing_h7) // 3
     y0 = np.append(duffing_h7.z[i], duffing_h7.p[i] / scale)
     y1 = np.append(duffing_h7.z[i + 1], duffing_h7.p[i + 1] / scale)
-    chord = _jit_call(compiled, chord=True)
+    chord = _jit_call(compiled, chord=True, scale=scale)
     secant = (y1 - y0) / np.linalg.norm(y1 - y0)
     at_y0 = chord(y0, secant, secant @ y0, secant, 0, np.inf)  # converged at once: tangent + LU at y0
     t = at_y0.tangent
@@ -326,7 +327,7 @@ def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
     np.testing.assert_allclose(got.y, ref.y, atol=1e-10)
     np.testing.assert_allclose(got.tangent, ref.tangent, atol=1e-9)
 
-    far = _jit_call(compiled, chord=True)
+    far = _jit_call(compiled, chord=True, scale=scale)
     y_far = np.append(duffing_h7.z[-1], duffing_h7.p[-1] / scale)
     far(y_far, secant, secant @ y_far, secant, 0, np.inf)  # keeps the LU of the last point
     restarted = far(y_pred, t, t @ y_pred, t, 10, 1e-11)
@@ -358,7 +359,7 @@ def test_step_control_counts_a_chord_iteration_as_half_a_newton_iteration(duffin
     i = len(duffing_h7) // 3
     y0, y1 = (np.append(duffing_h7.z[j], duffing_h7.p[j] / scale) for j in (i, i + 1))
     secant = (y1 - y0) / np.linalg.norm(y1 - y0)
-    chord = _jit_call(compiled, chord=True)
+    chord = _jit_call(compiled, chord=True, scale=scale)
     t = chord(y0, secant, secant @ y0, secant, 0, np.inf).tangent
     y_pred = y0 + 1.5 * np.linalg.norm(y1 - y0) * t
     got = chord(y_pred, t, t @ y_pred, t, 10, 1e-11)  # chord steps only
