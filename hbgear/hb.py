@@ -22,7 +22,6 @@ The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 from functools import partial
 
@@ -128,12 +127,10 @@ class HarmonicBalance:
         if key not in _FROZEN_CACHE:
             if len(_FROZEN_CACHE) > 64:
                 _FROZEN_CACHE.clear()
-            # compile-time evaluation only under an outer trace (vmap/jvp; under jit the calls are
-            # staged anyway): outside one it would compile every operation on constants inside
-            # the traced functions on its own (~50 small XLA programs, ~1 s at every start)
-            with jax.ensure_compile_time_eval() if _under_trace() else contextlib.nullcontext():
-                blocks = self._blocks_jit(system, p, quad + (None,))
-                _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad),)
+            # in numpy: a one-off computation of a few ms, which compiled for ~2 s in XLA
+            quad_np = tuple(np.asarray(a) for a in quad[:3]) + (None,)
+            blocks = tuple(jnp.asarray(b) for b in self._blocks(system, p, quad_np))
+            _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad_np),)
         return _FROZEN_CACHE[key]
 
     def _forcing_pieces(self, system, quad):
@@ -153,74 +150,74 @@ class HarmonicBalance:
         """
         if not getattr(system, "forcing_affine_in_frequency", False):
             return None
-        pieces, error, scale = self._forcing_pieces_jit(system, quad)
-        if not (np.isfinite(float(error)) and float(error) <= 1e-11 * float(scale)):
-            return None  # the declared structure does not hold: full quadrature every call
-        return pieces
-
-    @partial(jax.jit, static_argnums=0)
-    def _forcing_pieces_jit(self, system, quad):
-        """The pieces from ``p_a = 1``, ``p_b = 3``, checked against the quadrature at ``p_c = 2``
-        (one compiled call: op-by-op evaluation would compile every operation on its own)."""
+        # from p_a = 1, p_b = 3, checked against the quadrature at p_c = 2
         quad = quad[:3] + (False,)  # forcing probe only
         s_star = quad[0][:1]
 
         def at(p):
-            forcing, _, _ = self._periodic_coefficients(system, p, quad)
-            real = fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
-            return real, self._point_forcing(system, p, s_star), system.excitation_frequency(p)
+            forcing, _, _ = self._periodic_coefficients(system, p, quad, np)
+            real = fourier.coefficients_to_real(forcing, self.harmonics, np).reshape(self.size)
+            return real, self._point_forcing(system, p, s_star, np), system.excitation_frequency(p)
 
-        f, pt, w = jax.vmap(at)(jnp.array([1.0, 3.0, 2.0]))  # traced once
-        (f_a, f_b, f_c), (pt_a, pt_b, _), (w_a, w_b, _) = f, pt, w
+        (f_a, pt_a, w_a), (f_b, pt_b, w_b), (f_c, _, _) = at(1.0), at(3.0), at(2.0)
         pieces = (f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
-        error = jnp.max(jnp.abs(self._combined_forcing(system, 2.0, pieces) - f_c))
-        return pieces, error, jnp.max(jnp.abs(f_c)) + 1e-300
+        error = np.max(np.abs(self._combined_forcing(system, 2.0, pieces, np) - f_c))
+        if not (np.isfinite(error) and error <= 1e-11 * (np.max(np.abs(f_c)) + 1e-300)):
+            return None  # the declared structure does not hold: full quadrature every call
+        return tuple(jnp.asarray(a) for a in pieces)
 
-    def _point_forcing(self, system, p, s_star):
-        zero = jnp.zeros((self.ndof, 1))
-        return system.force(s_star, zero, zero, p, "linear", 0.0, jnp)[:, 0]
+    def _point_forcing(self, system, p, s_star, xp=jnp):
+        zero = xp.zeros((self.ndof, 1))
+        return system.force(s_star, zero, zero, p, "linear", 0.0, xp)[:, 0]
 
-    def _combined_forcing(self, system, p, pieces):
+    def _combined_forcing(self, system, p, pieces, xp=jnp):
         f_a, d_hat, w_a, pt_a, d_pt, s_star = pieces
         dw = system.excitation_frequency(p) - w_a
-        mean_fix = self._point_forcing(system, p, s_star) - pt_a - dw * d_pt  # (ndof,)
-        return (f_a + dw * d_hat).at[:: self.block].add(mean_fix)
+        mean_fix = self._point_forcing(system, p, s_star, xp) - pt_a - dw * d_pt  # (ndof,)
+        mean = np.zeros(self.size)
+        mean[:: self.block] = 1.0  # the a_0 slot of each coordinate
+        return f_a + dw * d_hat + xp.repeat(mean_fix, self.block) * mean
 
-    @partial(jax.jit, static_argnums=0)
-    def _blocks_jit(self, system, p, quad):
+    def _blocks(self, system, p, quad):
+        """``(A_0, A_1, A_2, C_conv)`` of :meth:`_frozen_blocks` (numpy)."""
         H = self.harmonics
-        _, stiffness, damping = self._periodic_coefficients(system, p, quad)
-        k_conv = fourier.convolution_matrix(stiffness, H, jnp)
-        c_conv = fourier.convolution_matrix(damping, H, jnp)
-        d1 = fourier.derivative_matrix(H, 1.0, jnp)
-        mass = system.mass_matrix(p, jnp)
+        _, stiffness, damping = self._periodic_coefficients(system, p, quad, np)
+        k_conv = fourier.convolution_matrix(stiffness, H, np)
+        c_conv = fourier.convolution_matrix(damping, H, np)
+        d1 = fourier.derivative_matrix(H, 1.0, np)
+        mass = np.asarray(system.mass_matrix(p, np), dtype=float)
         a2 = mass[:, :, None, None] * (d1 @ d1)[None, None] + 0.0 * k_conv
-        return self._flatten(k_conv), self._flatten(c_conv @ d1[None, None]), self._flatten(a2), self._flatten(c_conv)
+        flat = lambda b: self._flatten(b, np)  # noqa: E731
+        return flat(k_conv), flat(c_conv @ d1[None, None]), flat(a2), flat(c_conv)
 
-    def _periodic_coefficients(self, system, p, quad):
+    def _periodic_coefficients(self, system, p, quad, xp=jnp):
         """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
 
         ``Q_lin`` is affine in ``(q, q')``, so probing it at ``0`` and at unit vectors gives its
-        coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes.
+        coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes
+        (a loop over them in numpy).
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
         s, kernel_cos, kernel_sin, frozen = quad
-        eye = jnp.eye(n)
+        eye = xp.eye(n)
         if frozen is not None:  # only the forcing is needed (frozen blocks, or False): probe at 0 alone
-            eye = jnp.zeros((0, n))
-        probes_q = jnp.concatenate([jnp.zeros((1, n)), eye, jnp.zeros_like(eye)])
-        probes_v = jnp.concatenate([jnp.zeros((1, n)), jnp.zeros_like(eye), eye])
-        ones = jnp.ones_like(s)
+            eye = xp.zeros((0, n))
+        probes_q = xp.concatenate([xp.zeros((1, n)), eye, xp.zeros_like(eye)])
+        probes_v = xp.concatenate([xp.zeros((1, n)), xp.zeros_like(eye), eye])
+        ones = xp.ones_like(s)
 
         def force(qv, vv):
-            return system.force(s, qv[:, None] * ones, vv[:, None] * ones, p, "linear", 0.0, jnp)
+            return system.force(s, qv[:, None] * ones, vv[:, None] * ones, p, "linear", 0.0, xp)
 
-        values = jax.vmap(force)(probes_q, probes_v)  # (1+2n, n, nodes)
+        if xp is np:
+            values = np.stack([np.asarray(force(a, b), dtype=float) for a, b in zip(probes_q, probes_v)])
+        else:
+            values = jax.vmap(force)(probes_q, probes_v)  # (1+2n, n, nodes)
         coeff = values @ kernel_cos.T - 1j * (values @ kernel_sin.T)
-        coeff = fourier.mesh_to_base(coeff, nu, 2 * H + 1, jnp)  # (1+2n, n, 2H+1)
+        coeff = fourier.mesh_to_base(coeff, nu, 2 * H + 1, xp)  # (1+2n, n, 2H+1)
         forcing = coeff[0]
-        stiffness = jnp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
-        damping = jnp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
+        stiffness = xp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
+        damping = xp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
         return forcing, stiffness, damping
 
     def linear_operator(self, system, p, quad=None):
@@ -258,8 +255,8 @@ class HarmonicBalance:
         forcing, _, _ = self._periodic_coefficients(system, p, quad)
         return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
 
-    def _flatten(self, blocks):
-        return jnp.transpose(blocks, (0, 2, 1, 3)).reshape(self.size, self.size)
+    def _flatten(self, blocks, xp=jnp):
+        return xp.transpose(blocks, (0, 2, 1, 3)).reshape(self.size, self.size)
 
     # -- residual --------------------------------------------------------------------------------
     def _split(self, system, z):
@@ -427,11 +424,6 @@ class HarmonicBalance:
 
 def _has_tracer(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
-
-
-def _under_trace() -> bool:
-    """True inside a jit/vmap trace (where operations on constants are staged, not run)."""
-    return isinstance(jnp.zeros(()) + 0.0, jax.core.Tracer)
 
 
 _QUADRATURE_CACHE: dict = {}
