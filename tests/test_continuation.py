@@ -374,3 +374,29 @@ def test_step_control_counts_a_chord_iteration_as_half_a_newton_iteration(duffin
                                 PseudoArclength(jit_step=True, chord=True), **options)
     assert newton_branch.status == chord_branch.status == Status.SUCCESS
     assert len(chord_branch) <= 1.2 * len(newton_branch)
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning", "ignore::scipy.linalg.LinAlgWarning")
+def test_compiled_line_search_equals_the_python_corrector():
+    """Newton on atan(5 z) = 0.3 overshoots from |5 z| > 1.4: the backtracking line search runs.
+    The compiled corrector (its line search as loop turns) lands where the Python one does,
+    with the same iteration counts, and fails the same way where both fail."""
+    from hbgear.continuation import _jit_call, _jit_corrector, _python_corrector
+
+    def rj(z, p):
+        return jnp.stack([jnp.arctan(5 * z[0]) - 0.3 * p]), jnp.array([[5 / (1 + 25 * z[0] ** 2)]]), jnp.array([-0.3])
+
+    def r(z, p):
+        return rj(z, p)[0]
+
+    python = _python_corrector(rj, r, 1.0, 1)
+    compiled = _jit_call(_jit_corrector(rj, r, 1), chord=False, scale=1.0)
+    row = np.array([0.0, 1.0])
+    for z0 in (0.6, 0.8, 1.3, -0.6):
+        y = np.array([z0, 1.0])
+        a, b = python(y, row, 1.0, row, 20, 1e-12), compiled(y, row, 1.0, row, 20, 1e-12)
+        assert type(a) is type(b) and a.iterations == b.iterations
+        if hasattr(a, "y"):
+            assert a.iterations >= 4 and abs(b.y[0] - np.tan(0.3) / 5) <= 1e-12
+        else:
+            assert a.reason == b.reason
