@@ -94,12 +94,16 @@ class PseudoArclength:
       limit) -- the resolution in ``p`` where the branch is flat while ``ds_max`` is sized for
       the unknowns.
     - `jit_step`: run each corrector (Newton iterations, line search, tangent) as ONE compiled
-      JAX function (``lax.while_loop``) instead of a Python loop. Needs residual functions that
+      JAX function (``lax.while_loop``) instead of a Python loop, and runs of regular steps (up
+      to ``SEGMENT_POINTS`` per call, with the same predictor, acceptance tests and step-size
+      control) inside it; any other step (refused, failed, a fold, the end of the range) goes
+      back to the Python loop. Needs residual functions that
       JAX can trace in ``(z, p)`` (e.g. :meth:`hbgear.hb.HarmonicBalance.residual_and_jacobians`
       with the system closed over); otherwise the run falls back to the Python corrector with
       a warning. Same algorithm, same points to rounding (LU by XLA instead of scipy); it
-      removes the per-evaluation dispatch and conversion overhead, which dominates small and
-      mid-size problems. Costs one compilation per run (~1-3 s).
+      removes the per-evaluation and per-step dispatch and conversion overhead, which dominates
+      small and mid-size problems. Costs one compilation per set of residual functions (1-5 s;
+      kept in the disk cache, and ``p_ref`` is an argument, so a new range does not recompile).
     - `chord`: with `jit_step`, a modified (chord) Newton corrector: the iterations reuse the LU
       of the bordered Jacobian factored for the tangent at the last converged point (one
       residual evaluation and two triangular solves per iteration, no Jacobian), and the
@@ -288,19 +292,17 @@ def _python_corrector(residual_and_jacobians, residual, scale, size):
 
 #: Regular steps one call of the compiled corrector may take in a row (:meth:`_Compiled.segment`).
 SEGMENT_POINTS = 32
-CHORD, LINE_SEARCH, CHORD_START = 3, 4, 5  # the compiled corrector's residual-only loop modes
 
 
 def _jit_corrector(residual_and_jacobians, residual, size):
     """The corrector of :func:`_python_corrector`, and the regular continuation steps around it,
     as one compiled JAX function (``advance``), and ``no_factor`` (an unusable chord LU).
 
-    One corrector loop turn = one ``(R, R_z, R_p)`` evaluation (modes 0-2) or one residual
-    evaluation (modes 3-5) at a candidate; ``mode`` says what the candidate is: 0 the predictor
-    (taken as it is), 1 a full Newton step (taken if it decreases ``max |R|``, else the line
-    search starts), 2 the line search's result (taken as it is), 3 a chord step, 4 a line-search
-    trial, 5 the predictor before the first chord step. ``status``: -1 running, 0 converged,
-    1 non-finite residual, 2 singular bordered Jacobian, 3 not converged in
+    One corrector loop turn = one ``(R, R_z, R_p)`` evaluation at a candidate; ``mode`` says
+    what the candidate is: 0 the predictor (taken as it is), 1 a full Newton step (taken if it
+    decreases ``max |R|``, else a residual-only backtracking gives the next candidate), 2 the
+    result of a backtracking (taken as it is), 3 a chord step. ``status``: -1 running, 0
+    converged, 1 non-finite residual, 2 singular bordered Jacobian, 3 not converged in
     ``max_iter``. Each callable is traced once, whatever the number of iterations or steps; the
     parameter scale ``p_ref`` is an argument (a new range does not recompile).
     """
@@ -357,49 +359,27 @@ def _jit_corrector(residual_and_jacobians, residual, size):
             u = jax.scipy.linalg.lu_solve((lu, piv), -jnp.append(r, row @ y - target))
             return y + u - v * (d @ u) / denominator
 
-        def residual_turn(s):
-            """Modes 3 (chord step), 4 (line-search trial) and 5 (the predictor, before the first
-            chord step): ONE residual evaluation, at the point the mode names (one call site of
-            the residual in the compiled program, which keeps its compilation short)."""
-            mode = s["mode"]
-            point = jax.lax.cond(mode == CHORD, lambda: chord_step(s["y"], s["r"]), lambda: s["cand"])
-            r = residual_of(point)
+        def chord(s):
+            cand = chord_step(s["y"], s["r"])
+            r = residual_of(cand)
             norm = jnp.max(jnp.abs(r))
+            it = s["it"] + 1
+            contracted = jnp.isfinite(norm) & (norm <= 0.5 * s["norm"])
+            done = contracted & (norm <= tolerance) & constraint_ok(cand)
+            # linear convergence at the observed rate: the next step will be converged, so take it
+            # and evaluate (R, R_z, R_p) there at once (the Jacobian is needed for the tangent)
+            last = contracted & ~done & (norm * (norm / s["norm"]) <= 0.5 * tolerance) & (it < max_iter)
+            go_on = contracted & ~done & ~last & (it < max_iter)
+            restart = ~done & ~go_on & ~last  # back to the predictor, Newton
+            cand = jnp.where(last, chord_step(cand, r), cand)
+            it = jnp.where(last, it + 1, it)
+            # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
+            return {**s, "it": jnp.where(go_on, it, 0).astype(jnp.int32), "y": jnp.where(restart, s["y"], cand),
+                    "r": r, "norm": jnp.where(restart | last, jnp.inf, norm), "cand": jnp.where(restart, y_pred, cand),
+                    "mode": jnp.where(go_on, 3, 0).astype(jnp.int32),
+                    "chord_it": jnp.where(go_on, 0, it).astype(jnp.int32)}
 
-            def chord_start(_):
-                return {**s, "y": point, "r": r, "norm": norm, "mode": jnp.asarray(CHORD, i32)}
-
-            def chord(_):
-                it = s["it"] + 1
-                contracted = jnp.isfinite(norm) & (norm <= 0.5 * s["norm"])
-                done = contracted & (norm <= tolerance) & constraint_ok(point)
-                # linear convergence at the observed rate: the next step will be converged, so take
-                # it and evaluate (R, R_z, R_p) there at once (the Jacobian is needed for the tangent)
-                last = contracted & ~done & (norm * (norm / s["norm"]) <= 0.5 * tolerance) & (it < max_iter)
-                go_on = contracted & ~done & ~last & (it < max_iter)
-                restart = ~done & ~go_on & ~last  # back to the predictor, Newton
-                cand = jnp.where(last, chord_step(point, r), point)
-                it = jnp.where(last, it + 1, it)
-                # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
-                return {**s, "it": jnp.where(go_on, it, 0).astype(i32), "y": jnp.where(restart, s["y"], cand),
-                        "r": r, "norm": jnp.where(restart | last, jnp.inf, norm),
-                        "cand": jnp.where(restart, y_pred, cand), "mode": jnp.where(go_on, CHORD, 0).astype(i32),
-                        "chord_it": jnp.where(go_on, 0, it).astype(i32)}
-
-            def line_search(_):
-                alpha = s["alpha"]
-                ok = jnp.isfinite(norm) & (norm < (1 - 1e-4 * alpha) * s["norm"])
-                finished = ok | (alpha <= 1 / 8)  # then evaluate (R, R_z) there and take it
-                half = 0.5 * alpha
-                return {**s, "alpha": jnp.where(finished, alpha, half),
-                        "cand": jnp.where(finished, point, s["y"] + half * s["step"]),
-                        "mode": jnp.where(finished, 2, LINE_SEARCH).astype(i32)}
-
-            return jax.lax.switch(mode - CHORD, [chord, line_search, chord_start], None)
-
-        def newton_turn(s):
-            """Modes 0 (take the candidate), 1 (a full Newton step: taken if it decreases
-            ``max |R|``, else the line search starts) and 2 (a line-search result, taken)."""
+        def newton(s):
             r_c, jac_c = evaluate(s["cand"])
             norm_c = jnp.max(jnp.abs(r_c))
             decreased = jnp.isfinite(norm_c) & (norm_c < (1 - 1e-4) * s["norm"])
@@ -409,33 +389,45 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                 y, residual_y = s["cand"], row @ s["cand"] - target
                 converged = (norm_c <= tolerance) & constraint_ok(y)
                 status = jnp.where(~jnp.isfinite(norm_c), 1,
-                                   jnp.where(converged, 0, jnp.where(it >= max_iter, 3, -1))).astype(i32)
+                                   jnp.where(converged, 0, jnp.where(it >= max_iter, 3, -1))).astype(jnp.int32)
 
                 def newton_step(_):
                     a = jnp.concatenate([jac_c, row[None]], axis=0)
                     step = jnp.linalg.solve(a, -jnp.append(r_c, residual_y))
                     ok = jnp.all(jnp.isfinite(step))
-                    return jnp.where(ok, y + step, y), step, jnp.where(ok, -1, 2).astype(i32)
+                    return jnp.where(ok, y + step, y), step, jnp.where(ok, -1, 2).astype(jnp.int32)
 
                 cand, step, status = jax.lax.cond(status < 0, newton_step,
                                                   lambda _: (y, s["step"], status), None)
-                return {**s, "it": it.astype(i32), "y": y, "jac": jac_c, "norm": norm_c, "cand": cand,
+                return {**s, "it": it.astype(jnp.int32), "y": y, "jac": jac_c, "norm": norm_c, "cand": cand,
                         "step": step, "mode": jnp.ones_like(s["mode"]), "status": status}
 
-            def backtrack(_):  # halve the step until max|R| decreases, at most to 1/8
-                return {**s, "alpha": jnp.asarray(0.5), "cand": s["y"] + 0.5 * s["step"],
-                        "mode": jnp.asarray(LINE_SEARCH, i32)}
+            def backtrack(_):
+                y, step, norm = s["y"], s["step"], s["norm"]
+
+                def ls_cond(c):
+                    alpha, ok = c
+                    return (alpha > 1 / 8) & ~ok
+
+                def ls_body(c):
+                    alpha = 0.5 * c[0]
+                    n = jnp.max(jnp.abs(residual_of(y + alpha * step)))
+                    return alpha, jnp.isfinite(n) & (n < (1 - 1e-4 * alpha) * norm)
+
+                alpha, _ = jax.lax.while_loop(ls_cond, ls_body, (jnp.asarray(1.0, float), jnp.asarray(False)))
+                return {**s, "cand": y + alpha * step, "mode": jnp.full_like(s["mode"], 2)}
 
             return jax.lax.cond((s["mode"] != 1) | decreased, take, backtrack, None)
 
         i32 = jnp.int32
         start_chord = usable & (max_iter > 0)
-        init = dict(it=jnp.asarray(0, i32), y=y_pred, r=jnp.zeros(size), jac=jnp.zeros((size, size + 1)),
-                    norm=jnp.asarray(jnp.inf), cand=y_pred, step=jnp.zeros(size + 1), alpha=jnp.asarray(1.0),
-                    mode=jnp.where(start_chord, CHORD_START, 0).astype(i32), status=jnp.asarray(-1, i32),
-                    chord_it=jnp.asarray(0, i32))
+        r0 = jax.lax.cond(start_chord, lambda: residual_of(y_pred), lambda: jnp.zeros(size))
+        norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
+        init = dict(it=jnp.asarray(0, i32), y=y_pred, r=r0, jac=jnp.zeros((size, size + 1)), norm=norm0,
+                    cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, 3, 0).astype(i32),
+                    status=jnp.asarray(-1, i32), chord_it=jnp.asarray(0, i32))
         s = jax.lax.while_loop(lambda s: s["status"] < 0,
-                               lambda s: jax.lax.cond(s["mode"] >= CHORD, residual_turn, newton_turn, s), init)
+                               lambda s: jax.lax.cond(s["mode"] == 3, chord, newton, s), init)
         t, new_factor = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous),
                                      lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
         return s["y"], s["norm"], s["it"], s["chord_it"], s["status"], t, new_factor
