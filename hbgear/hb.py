@@ -11,7 +11,10 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 - ``K_conv``, ``C_conv``, ``F``: Galerkin matrices / vector of the affine periodic part
   ``Q_lin = F(s) - K(s) q - C(s) q'``, from its exact Fourier coefficients (composite
   Gauss--Legendre between the breakpoints, :mod:`hbgear.quadrature`): no sampling error.
-- ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT).
+- ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
+  with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
+  of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._jump_correction`):
+  ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump.
 - A ``free_mean_dof`` has its mean pinned to zero; its slot in ``X`` holds the constant force
   unknown (e.g. the reaction output torque) instead.
 
@@ -270,7 +273,7 @@ class HarmonicBalance:
         return x.at[slot].set(0.0), extra
 
     def _nonlinear(self, x, velocity, extra, p, system):
-        """``P Q_nl(E x, E v)`` in SI (zero for linear systems)."""
+        """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_jump_correction`)."""
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
         if system.is_linear:
             return jnp.zeros(self.size)
@@ -278,7 +281,50 @@ class HarmonicBalance:
         qd = fourier.synthesize(velocity.reshape(n, self.block), H, N, jnp)
         s = jnp.mod(jnp.arange(N) * nu / N, 1.0)
         fnl = system.force(s, q, qd, p, "nonlinear", extra, jnp)
-        return fourier.project(fnl, H, jnp).reshape(self.size)
+        return (fourier.project(fnl, H, jnp) + self._jump_correction(x, velocity, extra, p, system)).reshape(self.size)
+
+    def _jump_correction(self, x, velocity, extra, p, system):
+        r"""What the uniform-sample projection of ``Q_nl`` misses at its jumps, shape ``(ndof, 2H+1)``.
+
+        ``Q_nl`` jumps where the load shares do (a pair enters or leaves contact, at known mesh
+        phases): sampled uniformly, a jump aliases at ``O(1/N)``. With ``J_c`` the jump at base
+        phase ``t_c`` (from ``Q_nl`` just after and just before ``t_c``, at the state there), and the
+        sawtooth ``B_c(t) = 1/2 - frac(t - t_c)`` (unit jump at ``t_c``, exact coefficients
+        ``a_k = -sin(2 pi k t_c)/(pi k)``, ``b_k = cos(2 pi k t_c)/(pi k)``),
+
+            P Q_nl  ~  P (Q_nl - sum_c J_c B_c) + sum_c J_c B_hat_c = P Q_nl + sum_c J_c (B_hat_c - P B_c):
+
+        the sampled function left is continuous, so the projection errs at ``O(1/N^2)``. The
+        candidate phases are 0 and the system's breakpoints (a phase listed twice counts once; a
+        phase where ``Q_nl`` is continuous gives ``J_c ~ 0``). Jumps at phases the state decides
+        (a Coulomb law's ``V_s = 0``) stay ``O(1/N)``.
+        """
+        n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
+        phase = jnp.mod(jnp.concatenate([jnp.zeros(1), jnp.ravel(jnp.asarray(system.breakpoints(p, jnp)))]), 1.0)
+        gap = jnp.abs(phase[:, None] - phase[None, :])
+        weight = 1.0 / jnp.sum(jnp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
+        s_c = jnp.tile(phase, nu)  # mesh phases; base phases t_c = (s_c + j) / nu, j = 0 .. nu-1
+        t_c = ((phase[None, :] + jnp.arange(nu)[:, None]) / nu).ravel()
+        weight = jnp.tile(weight, nu)
+        k = jnp.arange(1, H + 1)
+        angle = 2 * np.pi * t_c[:, None] * k[None]  # (C, H)
+
+        def real_basis(cos, sin, mean):
+            return jnp.concatenate([mean, jnp.stack([cos, sin], axis=-1).reshape(cos.shape[0], 2 * H)], axis=1)
+
+        ones = jnp.ones((t_c.shape[0], 1))
+        at_c = real_basis(jnp.cos(angle), jnp.sin(angle), ones)  # (C, 2H+1): x(t_c) = x @ at_c.T
+        q_c = x.reshape(n, self.block) @ at_c.T
+        v_c = velocity.reshape(n, self.block) @ at_c.T
+        eps = 1e-12
+        sides = jnp.concatenate([jnp.mod(s_c + eps, 1.0), jnp.mod(s_c - eps, 1.0)])
+        both = system.force(sides, jnp.concatenate([q_c, q_c], 1), jnp.concatenate([v_c, v_c], 1), p, "nonlinear",
+                            extra, jnp)
+        count = t_c.shape[0]
+        jump = (both[:, :count] - both[:, count:]) * weight[None]  # (ndof, C)
+        exact = real_basis(-jnp.sin(angle) / (np.pi * k), jnp.cos(angle) / (np.pi * k), 0 * ones)
+        sawtooth = 0.5 - jnp.mod(jnp.arange(N)[None] / N - t_c[:, None], 1.0)  # (C, N)
+        return jump @ (exact - fourier.project(sawtooth, H, jnp))
 
     def _velocity(self, x, system, p):
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
@@ -328,7 +374,8 @@ class HarmonicBalance:
         exactly when ``N > 4H`` (no index wraps), so the Jacobian costs ``2 ndof`` pointwise
         directional derivatives and FFTs instead of ``ndof (2H+1)`` tangents through the AFT;
         ``ndof`` when the system declares ``nonlinear_force_uses_displacement = False``
-        (``T_q = 0``, e.g. friction that depends on the velocities only).
+        (``T_q = 0``, e.g. friction that depends on the velocities only). The jump correction
+        (:meth:`_jump_correction`) adds its own small Jacobian (forward mode).
         """
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
@@ -349,8 +396,16 @@ class HarmonicBalance:
             derivatives.insert(0, dq)
         coeff = jnp.fft.rfft(jnp.stack(derivatives), axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, n, B, B)
-        t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
-        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
+        # the jump correction: a function of the state at a few phases; its Jacobian by forward mode
+        velocity = (xc @ d.T).reshape(self.size)
+        if uses_q:
+            c_q, c_v = jax.jacfwd(lambda a, b: self._jump_correction(a, b, extra, p, system).reshape(self.size),
+                                  argnums=(0, 1))(x, velocity)
+            t_q = self._flatten(blocks[0]) + c_q
+        else:
+            c_v = jax.jacfwd(lambda b: self._jump_correction(x, b, extra, p, system).reshape(self.size))(velocity)
+            t_q = jnp.zeros((self.size, self.size))
+        return t_q, self._flatten(blocks[-1]) + c_v, jnp.kron(jnp.eye(n), d)
 
     def _times_derivative(self, a, system, p):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times

@@ -255,3 +255,42 @@ def test_nonlinear_start_from_the_quasi_static_state_equals_the_ltv_start(speed_
     from_ltv = solve_periodic(model, w, z0=ltv.z, **options)
     assert not np.allclose(ltv.z, from_ltv.z, rtol=0, atol=1e-6)  # the friction model matters here
     np.testing.assert_allclose(default.z, from_ltv.z, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("formulation", ["A", "B"])
+def test_aft_jump_correction_converges_at_second_order(formulation):
+    """The AFT projection of NLTV friction (load shares jump at pair entry and exit) against the
+    composite Gauss-Legendre quadrature between the breakpoints (hbgear.quadrature, an
+    independent route): sampled plainly it errs at O(1/N); with the jump correction at O(1/N^2),
+    and far below the plain projection at the same N."""
+    from hbgear.quadrature import fourier_coefficients, mesh_period_rule
+
+    model = model_with("friction.model=NLTV", "friction.law=arctan", "friction.v0_m_per_s=0.5",
+                       f"friction.formulation={formulation}")
+    system, omega, harmonics = GearSystem(model), rpm_to_rad_s(6000), 8
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=2 * (2 * harmonics + 1)) * 0.2 * float(system.displacement_scale)
+    x[0] += float(system.displacement_scale)
+
+    def sampled_force(hb, s):
+        d = fourier.derivative_matrix(harmonics, omega, np)
+        xc = x.reshape(2, -1)
+        basis = np.concatenate([np.ones((1, s.size)), np.stack([np.cos(np.outer(np.arange(1, harmonics + 1), 2 * np.pi * s)),
+                                np.sin(np.outer(np.arange(1, harmonics + 1), 2 * np.pi * s))], axis=1).reshape(2 * harmonics, s.size)])
+        return np.asarray(system.force(jnp.asarray(s), jnp.asarray(xc @ basis), jnp.asarray(xc @ d.T @ basis), omega,
+                                       "nonlinear", 0.0, jnp))
+
+    s, w = mesh_period_rule(np.asarray(model.breakpoint_candidates(np)), 4 * harmonics)
+    c = fourier_coefficients(sampled_force(None, s), s, w, harmonics)
+    exact = fourier.coefficients_to_real(c, harmonics)
+    errors = {}
+    for n in (128, 256, 512):
+        hb = HarmonicBalance(2, harmonics, 1, n)
+        v = (x.reshape(2, -1) @ fourier.derivative_matrix(harmonics, omega, np).T).ravel()
+        corrected = np.asarray(hb._nonlinear(jnp.asarray(x), jnp.asarray(v), 0.0, omega, system)).reshape(2, -1)
+        plain = fourier.project(sampled_force(hb, np.arange(n) / n), harmonics)
+        errors[n] = (np.abs(plain - exact).max(), np.abs(corrected - exact).max())
+    scale = np.abs(exact).max()
+    assert errors[512][0] > 1e-4 * scale  # the plain projection does alias
+    assert errors[128][1] / errors[512][1] > 10  # O(1/N^2): 16 for N x 4 (plain: ~4)
+    assert errors[512][1] < 0.02 * errors[512][0]
