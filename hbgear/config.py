@@ -181,7 +181,7 @@ class SolverConfig:
 
     harmonics: int | None = 24
     subharmonic: int = 1
-    time_samples: int = 4096
+    time_samples: int = 1024
     tolerance: float = 1e-9
     max_iterations: int = 50
 

@@ -211,7 +211,7 @@ def solve_periodic(
     **Raises:** :class:`ConvergenceError` when Newton (and the smoothing continuation for
     steep friction laws) does not reach `tolerance`.
     """
-    samples = samples or max(4096, 4 * harmonics * nu + 2)
+    samples = samples or max(1024, 4 * harmonics * nu + 2)
     samples += samples % nu
     hb, system = _problem(model, harmonics, nu, samples)
     omega = float(omega_pinion)

@@ -76,7 +76,7 @@ def test_paper_example_values_in_si():
     assert (cfg.friction.law, cfg.friction.mu0, cfg.friction.formulation) == ("coulomb", 0.1, "A")
     assert cfg.friction.model == "LTV"
     assert cfg.boundary.stiffness_ratio == 5e5 and cfg.boundary.output == "spring"
-    assert (cfg.solver.harmonics, cfg.solver.subharmonic, cfg.solver.time_samples) == (32, 1, 4096)
+    assert (cfg.solver.harmonics, cfg.solver.subharmonic, cfg.solver.time_samples) == (32, 1, 1024)
     assert (cfg.sweep.speed_rpm_start, cfg.sweep.speed_rpm_stop) == (1000.0, 20000.0)
     assert cfg.map.speed_steps == 49 and cfg.map.contact_ratio_steps == 7
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -99,7 +99,7 @@ def test_defaults_for_optional_sections():
     data = {k: base()[k] for k in ("gear", "mesh", "load")}
     cfg = parse_config(data)
     assert cfg.friction.law == "coulomb" and cfg.friction.mu0 == 0.1
-    assert cfg.solver.harmonics == 24 and cfg.solver.time_samples == 4096
+    assert cfg.solver.harmonics == 24 and cfg.solver.time_samples == 1024
     assert cfg.simulate.atol_m == pytest.approx(1e-15) and cfg.simulate.cycles == 400
     assert cfg.sweep.max_points == 4000 and cfg.sweep.step_rpm is None
     assert cfg.map.speed_rpm_start == 20000.0 and cfg.map.scheduler is None
