@@ -121,7 +121,8 @@ def breakdown(model, hb, system, rpm0, rpm1):
     with timed_linalg(timer):
         a = time.perf_counter()
         branch = continuation(timer.wrap("eval (R,J,dR/dp)", rjp_np), timer.wrap("eval R (line search)", res_np),
-                              start.z, w0, w1, frc_method(w0, w1), max_points=6000, tolerance=TOL, progress=False)
+                              start.z, w0, w1, dataclasses.replace(frc_method(w0, w1), jit_step=False, chord=False),
+                              max_points=6000, tolerance=TOL, progress=False)
         wall = time.perf_counter() - a
     size = hb.size + 1
     a_mat = np.random.default_rng(0).standard_normal((size, size))
