@@ -13,7 +13,7 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
   Gauss--Legendre between the breakpoints, :mod:`hbgear.quadrature`): no sampling error.
 - ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
   with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
-  of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._jump_correction`):
+  of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._sample_points`):
   ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump.
 - A ``free_mean_dof`` has its mean pinned to zero; its slot in ``X`` holds the constant force
   unknown (e.g. the reaction output torque) instead.
@@ -273,58 +273,78 @@ class HarmonicBalance:
         return x.at[slot].set(0.0), extra
 
     def _nonlinear(self, x, velocity, extra, p, system):
-        """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_jump_correction`)."""
-        n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
+        """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_sample_points`)."""
         if system.is_linear:
             return jnp.zeros(self.size)
-        q = fourier.synthesize(x.reshape(n, self.block), H, N, jnp)
-        qd = fourier.synthesize(velocity.reshape(n, self.block), H, N, jnp)
-        s = jnp.mod(jnp.arange(N) * nu / N, 1.0)
-        fnl = system.force(s, q, qd, p, "nonlinear", extra, jnp)
-        return (fourier.project(fnl, H, jnp) + self._jump_correction(x, velocity, extra, p, system)).reshape(self.size)
+        s, q, qd, (weight, delta) = self._sample_points(x, velocity, system, p)
+        values = system.force(s, q, qd, p, "nonlinear", extra, jnp)
+        N = self.samples
+        return (fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta).reshape(self.size)
 
-    def _jump_correction(self, x, velocity, extra, p, system):
-        r"""What the uniform-sample projection of ``Q_nl`` misses at its jumps, shape ``(ndof, 2H+1)``.
+    def _sample_points(self, x, velocity, system, p):
+        r"""Where ``Q_nl`` is evaluated: the ``N`` uniform samples of the base period, then each
+        candidate jump phase just after and just before it; returns ``(s, q, q', (weight, delta))``.
 
         ``Q_nl`` jumps where the load shares do (a pair enters or leaves contact, at known mesh
         phases): sampled uniformly, a jump aliases at ``O(1/N)``. With ``J_c`` the jump at base
-        phase ``t_c`` (from ``Q_nl`` just after and just before ``t_c``, at the state there), and the
+        phase ``t_c`` (``Q_nl`` just after minus just before ``t_c``, at the state there), and the
         sawtooth ``B_c(t) = 1/2 - frac(t - t_c)`` (unit jump at ``t_c``, exact coefficients
         ``a_k = -sin(2 pi k t_c)/(pi k)``, ``b_k = cos(2 pi k t_c)/(pi k)``),
 
-            P Q_nl  ~  P (Q_nl - sum_c J_c B_c) + sum_c J_c B_hat_c = P Q_nl + sum_c J_c (B_hat_c - P B_c):
+            P Q_nl  ~  P (Q_nl - sum_c J_c B_c) + sum_c J_c B_hat_c = P Q_nl + sum_c J_c (B_hat_c - P B_c)
 
-        the sampled function left is continuous, so the projection errs at ``O(1/N^2)``. The
-        candidate phases are 0 and the system's breakpoints (a phase listed twice counts once; a
-        phase where ``Q_nl`` is continuous gives ``J_c ~ 0``). Jumps at phases the state decides
-        (a Coulomb law's ``V_s = 0``) stay ``O(1/N)``.
+        (``delta_c = B_hat_c - P B_c``): the sampled function left is continuous, so the
+        projection errs at ``O(1/N^2)``. The candidates are phase 0 and the system's breakpoints
+        (a phase listed twice counts once: ``weight``; where ``Q_nl`` is continuous ``J_c ~ 0``).
+        A jump whose phase the state decides (a Coulomb law's ``V_s = 0``) stays ``O(1/N)``.
         """
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
-        phase = jnp.mod(jnp.concatenate([jnp.zeros(1), jnp.ravel(jnp.asarray(system.breakpoints(p, jnp)))]), 1.0)
-        gap = jnp.abs(phase[:, None] - phase[None, :])
-        weight = 1.0 / jnp.sum(jnp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
-        s_c = jnp.tile(phase, nu)  # mesh phases; base phases t_c = (s_c + j) / nu, j = 0 .. nu-1
-        t_c = ((phase[None, :] + jnp.arange(nu)[:, None]) / nu).ravel()
-        weight = jnp.tile(weight, nu)
-        k = jnp.arange(1, H + 1)
+        sides, at_c, weight, delta = self._jump_layout(system, p)
+        xc, vc = x.reshape(n, self.block), velocity.reshape(n, self.block)
+        q_c, v_c = xc @ at_c.T, vc @ at_c.T  # (ndof, C): the state at the jump phases
+        s = jnp.concatenate([jnp.mod(jnp.arange(N) * nu / N, 1.0), sides])
+        q = jnp.concatenate([fourier.synthesize(xc, H, N, jnp), q_c, q_c], axis=1)
+        qd = jnp.concatenate([fourier.synthesize(vc, H, N, jnp), v_c, v_c], axis=1)
+        return s, q, qd, (weight, delta)
+
+    def _jump_layout(self, system, p):
+        """``(sides, at_c, weight, delta)`` of :meth:`_sample_points`: the mesh phases just after
+        and just before each candidate ``(2C,)``, the synthesis rows ``x(t_c) = x @ at_c.T``
+        ``(C, 2H+1)``, ``1 / multiplicity`` ``(C,)`` and ``B_hat_c - P B_c`` ``(C, 2H+1)``.
+
+        Built once in numpy when the breakpoints cannot depend on the parameter (the system
+        declares ``coefficients_independent_of_parameter``), else in the trace.
+        """
+        if getattr(system, "coefficients_independent_of_parameter", False) and not _has_tracer(system):
+            breakpoints = tuple(np.round(np.ravel(np.asarray(system.breakpoints(1.0, np), dtype=float)), 15))
+            key = (self, breakpoints)
+            if key not in _JUMP_CACHE:
+                if len(_JUMP_CACHE) > 64:
+                    _JUMP_CACHE.clear()
+                _JUMP_CACHE[key] = self._jump_layout_of(np.asarray(breakpoints), np)
+            return _JUMP_CACHE[key]
+        return self._jump_layout_of(jnp.ravel(jnp.asarray(system.breakpoints(p, jnp))), jnp)
+
+    def _jump_layout_of(self, breakpoints, xp):
+        H, N, nu = self.harmonics, self.samples, self.nu
+        phase = xp.mod(xp.concatenate([xp.zeros(1), breakpoints]), 1.0)
+        gap = xp.abs(phase[:, None] - phase[None, :])
+        weight = 1.0 / xp.sum(xp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
+        s_c = xp.tile(phase, nu)  # mesh phases; base phases t_c = (s_c + j) / nu, j = 0 .. nu-1
+        t_c = ((phase[None, :] + xp.arange(nu)[:, None]) / nu).ravel()
+        k = xp.arange(1, H + 1)
         angle = 2 * np.pi * t_c[:, None] * k[None]  # (C, H)
 
         def real_basis(cos, sin, mean):
-            return jnp.concatenate([mean, jnp.stack([cos, sin], axis=-1).reshape(cos.shape[0], 2 * H)], axis=1)
+            return xp.concatenate([mean, xp.stack([cos, sin], axis=-1).reshape(cos.shape[0], 2 * H)], axis=1)
 
-        ones = jnp.ones((t_c.shape[0], 1))
-        at_c = real_basis(jnp.cos(angle), jnp.sin(angle), ones)  # (C, 2H+1): x(t_c) = x @ at_c.T
-        q_c = x.reshape(n, self.block) @ at_c.T
-        v_c = velocity.reshape(n, self.block) @ at_c.T
+        ones = xp.ones((t_c.shape[0], 1))
+        at_c = real_basis(xp.cos(angle), xp.sin(angle), ones)
         eps = 1e-12
-        sides = jnp.concatenate([jnp.mod(s_c + eps, 1.0), jnp.mod(s_c - eps, 1.0)])
-        both = system.force(sides, jnp.concatenate([q_c, q_c], 1), jnp.concatenate([v_c, v_c], 1), p, "nonlinear",
-                            extra, jnp)
-        count = t_c.shape[0]
-        jump = (both[:, :count] - both[:, count:]) * weight[None]  # (ndof, C)
-        exact = real_basis(-jnp.sin(angle) / (np.pi * k), jnp.cos(angle) / (np.pi * k), 0 * ones)
-        sawtooth = 0.5 - jnp.mod(jnp.arange(N)[None] / N - t_c[:, None], 1.0)  # (C, N)
-        return jump @ (exact - fourier.project(sawtooth, H, jnp))
+        sides = xp.concatenate([xp.mod(s_c + eps, 1.0), xp.mod(s_c - eps, 1.0)])
+        exact = real_basis(-xp.sin(angle) / (np.pi * k), xp.cos(angle) / (np.pi * k), 0 * ones)
+        sawtooth = 0.5 - xp.mod(xp.arange(N)[None] / N - t_c[:, None], 1.0)  # (C, N)
+        return sides, at_c, xp.tile(weight, nu), exact - fourier.project(sawtooth, H, xp)
 
     def _velocity(self, x, system, p):
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
@@ -374,15 +394,14 @@ class HarmonicBalance:
         exactly when ``N > 4H`` (no index wraps), so the Jacobian costs ``2 ndof`` pointwise
         directional derivatives and FFTs instead of ``ndof (2H+1)`` tangents through the AFT;
         ``ndof`` when the system declares ``nonlinear_force_uses_displacement = False``
-        (``T_q = 0``, e.g. friction that depends on the velocities only). The jump correction
-        (:meth:`_jump_correction`) adds its own small Jacobian (forward mode).
+        (``T_q = 0``, e.g. friction that depends on the velocities only). The jump terms of
+        :meth:`_sample_points` add ``delta_c^T dJ_c/dx(t_c) at_c`` from the same pointwise
+        derivatives at the jump phases.
         """
-        n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
+        n, H, N = self.ndof, self.harmonics, self.samples
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
-        xc = x.reshape(n, self.block)
-        q = fourier.synthesize(xc, H, N, jnp)
-        qd = fourier.synthesize(xc @ d.T, H, N, jnp)
-        s = jnp.mod(jnp.arange(N) * nu / N, 1.0)
+        s, q, qd, (weight, delta) = self._sample_points(x, (x.reshape(n, self.block) @ d.T).ravel(), system, p)
+        _, at_c, _, _ = self._jump_layout(system, p)
 
         def f(qq, vv):
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
@@ -394,18 +413,14 @@ class HarmonicBalance:
         if uses_q:
             dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
             derivatives.insert(0, dq)
-        coeff = jnp.fft.rfft(jnp.stack(derivatives), axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
+        derivatives = jnp.stack(derivatives)  # (1|2, n_row, n_col, N + 2C)
+        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, n, B, B)
-        # the jump correction: a function of the state at a few phases; its Jacobian by forward mode
-        velocity = (xc @ d.T).reshape(self.size)
-        if uses_q:
-            c_q, c_v = jax.jacfwd(lambda a, b: self._jump_correction(a, b, extra, p, system).reshape(self.size),
-                                  argnums=(0, 1))(x, velocity)
-            t_q = self._flatten(blocks[0]) + c_q
-        else:
-            c_v = jax.jacfwd(lambda b: self._jump_correction(x, b, extra, p, system).reshape(self.size))(velocity)
-            t_q = jnp.zeros((self.size, self.size))
-        return t_q, self._flatten(blocks[-1]) + c_v, jnp.kron(jnp.eye(n), d)
+        # the jump terms: J_c depends on the state at t_c only, x(t_c) = x @ at_c.T
+        jumps = _jumps(derivatives[..., N:], weight)  # (1|2, n, n, C)
+        blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, jumps, at_c)
+        t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
+        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
 
     def _times_derivative(self, a, system, p):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times
@@ -477,6 +492,12 @@ class HarmonicBalance:
         return jz * xs, d1, d2
 
 
+def _jumps(values, weight):
+    """``(Q_nl(t_c+) - Q_nl(t_c-)) * weight`` from the values at the ``2C`` jump sides (last axis)."""
+    count = weight.shape[0]
+    return (values[..., :count] - values[..., count:]) * weight
+
+
 def _has_tracer(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
@@ -484,3 +505,4 @@ def _has_tracer(tree) -> bool:
 _QUADRATURE_CACHE: dict = {}
 _PREPARED: dict = {}
 _FROZEN_CACHE: dict = {}
+_JUMP_CACHE: dict = {}

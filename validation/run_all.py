@@ -366,7 +366,7 @@ the default N = {DEFAULT_SAMPLES} AFT samples, TI with rtol 1e-9. MODEL.md secti
 
 - Linear couplings (LTI, LTV-A/B) balance to rounding in HB: the Galerkin projection of the mean
   is exact. NLTV's friction is evaluated on N uniform samples (AFT) with its jumps at pair entry
-  and exit corrected exactly (`HarmonicBalance._jump_correction`), so what remains is the
+  and exit corrected exactly (`HarmonicBalance._sample_points`), so what remains is the
   O(1/N^2) of a continuous sampled function (table). Before the correction the jumps aliased at
   O(1/N): 8e-5 (A) and 1.6e-4 (B) at N = 4096.
 - TI balances to ~1e-8 for every coupling. For LTI the excitation c d_st' has impulses at the
