@@ -411,14 +411,24 @@ class GearPairModel:
             delta = delta + 0.5 * self.backlash_m
         if self.boundary != "spring":
             return delta, 0.0 * omega_pinion
-        closed = self._mean_static_friction_force(omega_pinion, xp)
+        closed = self.static_windup(omega_pinion, xp)
         if closed is not None:
-            mean_force = self.torque_pinion_Nm / self.base_radius_pinion_m + closed
-            return delta, mean_force / self.spring_stiffness_N_per_m
+            return delta, closed
         q = xp.stack([delta, 0.0 * s])
         force = self.generalized_force(s, q, 0.0 * q, omega_pinion, "all", 0.0, 0.0, xp)
         # remove the spring's own term (q[1] = 0, qd = 0 -> it is zero) and average
         return delta, xp.sum(w * force[1]) / self.spring_stiffness_N_per_m
+
+    def static_windup(self, omega_pinion, xp=np):
+        """The soft spring's wind-up ``u_s`` [m] of :meth:`static_state` alone, without its
+        quadrature: zero unless "spring"; in closed form for the sgn and atan laws (``None`` for
+        the others, then ``static_state(...)[1]`` integrates it)."""
+        if self.boundary != "spring":
+            return 0.0 * omega_pinion
+        closed = self._mean_static_friction_force(omega_pinion, xp)
+        if closed is None:
+            return None
+        return (self.torque_pinion_Nm / self.base_radius_pinion_m + closed) / self.spring_stiffness_N_per_m
 
     def _mean_static_friction_force(self, omega_pinion, xp=np):
         r"""``< T_fp/R_bp + T_fg/R_bg >`` [N] of the quasi-static state in closed form, for the

@@ -111,7 +111,8 @@ class PeriodicSolution:
             reaction = float(z[slot] * system.force_scale)
             x = x.copy()
             x[slot] = 0.0
-        u_static = float(model.static_state(omega_pinion)[1]) if model.boundary == "spring" else 0.0
+        u_static = model.static_windup(omega_pinion)
+        u_static = float(model.static_state(omega_pinion)[1] if u_static is None else u_static)
         return cls(
             model=model,
             omega_pinion=float(omega_pinion),
