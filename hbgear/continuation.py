@@ -211,6 +211,23 @@ class _Failure(NamedTuple):
 _FAILURES = {1: "non-finite residual", 2: "singular bordered Jacobian"}
 
 
+def _grown_step(ds, work, angle_deg, ds_min, ds_max, max_angle_deg, growth, target_iterations, xp=np):
+    """``ds`` after an accepted step (module doc, item 5): ``ds * clip(min(target / work,
+    max_angle / (2 angle)), 1/2, growth)`` kept in ``[ds_min, ds_max]``; numpy or JAX (the
+    compiled segments run the same rule)."""
+    gain = target_iterations / xp.maximum(work, 1.0)
+    gain = xp.where(angle_deg > 0, xp.minimum(gain, max_angle_deg / (2 * xp.maximum(angle_deg, 1e-300))), gain)
+    return xp.minimum(ds_max, xp.maximum(ds_min, ds * xp.minimum(growth, xp.maximum(0.5, gain))))
+
+
+def _limited_step(ds, tangent_p, ds_min, max_parameter_step, xp=np):
+    """``ds`` cut so that the predicted change of ``p / p_ref`` is at most `max_parameter_step`
+    (``inf``: no limit), not below `ds_min`."""
+    slope = xp.abs(tangent_p)
+    return xp.where(slope * ds > max_parameter_step,
+                    xp.maximum(ds_min, max_parameter_step / xp.maximum(slope, 1e-300)), ds)
+
+
 def _unit(v):
     return v / np.linalg.norm(v)
 
@@ -443,7 +460,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         not back past ``p_start``.
 
         **Returns:** ``(taken, points, (y, t, ds), factor, pending)``: `taken` regular steps,
-        `points` their ``(y, t, max|R|, iterations, work, ds)`` stacked (``SEGMENT_POINTS`` rows,
+        `points` their ``(y, t, max|R|, iterations, ds)`` stacked (``SEGMENT_POINTS`` rows,
         the first `taken` valid), the state after them, the chord LU, and ``pending`` = ``[y,
         tangent, max|R|, Newton iterations, chord iterations, status, valid]`` of the last
         corrector run when it was not a regular step (for the caller to decide on; one array:
@@ -454,7 +471,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         rows = SEGMENT_POINTS
         state = dict(k=jnp.asarray(0, jnp.int32), y=y0, t=t0, ds=ds0, factor=factor, y_pred=y_pred, row=row,
                      target=target, previous=previous, done=jnp.asarray(False), pending=jnp.zeros(2 * m + 5),
-                     y_out=jnp.zeros((rows, m)), t_out=jnp.zeros((rows, m)), info=jnp.zeros((rows, 4)))
+                     y_out=jnp.zeros((rows, m)), t_out=jnp.zeros((rows, m)), info=jnp.zeros((rows, 3)))
 
         def turn(s):
             f = s["factor"]
@@ -471,14 +488,12 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                        & ~(((y[-1] - p_start) * direction < 0) & ((s["y"][-1] - p_start) * direction >= 0))
                        & (s["k"] < budget))
             work = newton_it + CHORD_ITERATION_WORK * chord_it
-            # step-size control and the parameter-step limit, as in continuation()
-            gain = target_work / jnp.maximum(work, 1.0)
-            gain = jnp.where(angle > 0, jnp.minimum(gain, max_angle / (2 * jnp.maximum(angle, 1e-300))), gain)
-            ds_next = jnp.minimum(ds_max, jnp.maximum(ds_min, ds * jnp.minimum(growth, jnp.maximum(0.5, gain))))
-            ds_next = jnp.where(jnp.abs(t[-1]) * ds_next > max_dp, jnp.maximum(ds_min, max_dp / jnp.abs(t[-1])), ds_next)
+            # the step-size control and the parameter-step limit of continuation()
+            ds_next = _grown_step(ds, work, angle, ds_min, ds_max, max_angle, growth, target_work, jnp)
+            ds_next = _limited_step(ds_next, t[-1], ds_min, max_dp, jnp)
             y_next = y + ds_next * t
             k = s["k"]
-            info = jnp.stack([norm, (newton_it + chord_it).astype(float), work, ds])
+            info = jnp.stack([norm, (newton_it + chord_it).astype(float), ds])
             pending = jnp.concatenate([y, t, jnp.stack([norm, newton_it.astype(float), chord_it.astype(float),
                                                         status.astype(float), 1.0])])
             taken = dict(k=k + 1, y=y, t=t, ds=ds_next, factor=factor, y_pred=y_next, row=t, target=t @ y_next,
@@ -551,7 +566,7 @@ class _Compiled:
         taken, (y_out, t_out, info), state, factor, pending = self._run(
             y_pred, t, t @ y_pred, t, max_iter, tolerance, y, t, ds, min(budget, SEGMENT_POINTS))
         taken, y_out, t_out, info, state, pending = self._jax.device_get((taken, y_out, t_out, info, state, pending))
-        points = [(y_out[i], t_out[i], float(info[i, 0]), int(info[i, 1]), float(info[i, 3])) for i in range(int(taken))]
+        points = [(y_out[i], t_out[i], float(info[i, 0]), int(info[i, 1]), float(info[i, 2])) for i in range(int(taken))]
         y, t, ds = np.asarray(state[0]), np.asarray(state[1]), float(state[2])
         if pending[-1] == 0:  # the budget ran out on regular steps
             self.last = factor
@@ -559,11 +574,6 @@ class _Compiled:
         if taken:  # the factor of the last regular point, unless the pending run converged
             self.last = factor
         return points, self._result(np.asarray(pending), factor, max_iter), (y, t, ds)
-
-
-def _jit_call(compiled, chord, scale=1.0, controls=None):
-    """The compiled corrector of one run (see :class:`_Compiled`)."""
-    return _Compiled(compiled, chord, scale, controls)
 
 
 _JIT_CACHE: dict = {}  # (residual_and_jacobians, residual, size) -> compiled corrector
@@ -614,6 +624,7 @@ def continuation(
     direction = 1.0 if p_end > p0 else -1.0
     z0 = np.asarray(z0, dtype=float)
     size = z0.size
+    max_parameter_step = math.inf if m.max_parameter_step is None else m.max_parameter_step
 
     python_correct = _python_corrector(residual_and_jacobians, residual, scale, size)
     corrector = [python_correct]
@@ -623,10 +634,9 @@ def continuation(
             if len(_JIT_CACHE) >= 8:
                 _JIT_CACHE.pop(next(iter(_JIT_CACHE)))
             _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, size)
-        controls = (m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations,
-                    math.inf if m.max_parameter_step is None else m.max_parameter_step,
+        controls = (m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations, max_parameter_step,
                     p_end / scale, direction, p0 / scale)
-        corrector[0] = _jit_call(_JIT_CACHE[key], m.chord, scale, controls)
+        corrector[0] = _Compiled(_JIT_CACHE[key], m.chord, scale, controls)
 
     def correct(y_pred, row, target, max_iter, previous, tol=tolerance):
         """Newton on ``R(y) = 0``, ``row . y = target``; a _Point (with the tangent oriented
@@ -720,8 +730,7 @@ def continuation(
                 detail = f"{max_points} points stored, last at p = {y[-1] * scale:.9g}"
                 break
             tried = []
-            if m.max_parameter_step is not None and abs(t[-1]) * ds > m.max_parameter_step:
-                ds = max(m.ds_min, m.max_parameter_step / abs(t[-1]))
+            ds = float(_limited_step(ds, t[-1], m.ds_min, max_parameter_step))
             pending = None
             if isinstance(corrector[0], _Compiled):  # regular steps in one compiled call
                 try:
@@ -807,11 +816,9 @@ def continuation(
                 break
 
             store(y_new, PointKind.REGULAR, point.iterations, point.r_norm, t_new, ds)
-            angle = _angle_deg(t_new, t)
-            factor = m.target_iterations / max(point.work, 1)
-            if angle > 0:
-                factor = min(factor, m.max_angle_deg / (2 * angle))
-            ds = min(m.ds_max, max(m.ds_min, ds * min(m.growth, max(0.5, factor))))
+            # `angle`: between t and t_new, from the acceptance test of this step
+            ds = float(_grown_step(ds, point.work, angle, m.ds_min, m.ds_max, m.max_angle_deg, m.growth,
+                                   m.target_iterations))
             y, t = y_new, t_new
             if bar is not None:
                 _advance_bar(bar, y, scale, p0, p_end, len(rows["p"]), ds)

@@ -308,14 +308,14 @@ def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
     """From the same predictor, the chord corrector (LU of the previous point, Sherman--Morrison
     for the new border row) lands on the Python Newton corrector's point, with its tangent; a
     factorisation from far away fails to contract and the Newton restart still lands there."""
-    from hbgear.continuation import _jit_call
+    from hbgear.continuation import _Compiled
 
     scale = 2.0
     python, compiled = _correctors(HB7, DUFFING, scale)
     i = len(duffing_h7) // 3
     y0 = np.append(duffing_h7.z[i], duffing_h7.p[i] / scale)
     y1 = np.append(duffing_h7.z[i + 1], duffing_h7.p[i + 1] / scale)
-    chord = _jit_call(compiled, chord=True, scale=scale)
+    chord = _Compiled(compiled, chord=True, scale=scale)
     secant = (y1 - y0) / np.linalg.norm(y1 - y0)
     at_y0 = chord(y0, secant, secant @ y0, secant, 0, np.inf)  # converged at once: tangent + LU at y0
     t = at_y0.tangent
@@ -327,7 +327,7 @@ def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
     np.testing.assert_allclose(got.y, ref.y, atol=1e-10)
     np.testing.assert_allclose(got.tangent, ref.tangent, atol=1e-9)
 
-    far = _jit_call(compiled, chord=True, scale=scale)
+    far = _Compiled(compiled, chord=True, scale=scale)
     y_far = np.append(duffing_h7.z[-1], duffing_h7.p[-1] / scale)
     far(y_far, secant, secant @ y_far, secant, 0, np.inf)  # keeps the LU of the last point
     restarted = far(y_pred, t, t @ y_pred, t, 10, 1e-11)
@@ -352,14 +352,14 @@ def test_step_control_counts_a_chord_iteration_as_half_a_newton_iteration(duffin
     chord corrector's slower, linear convergence does not shrink the steps: its branch has about
     as many points as the Newton corrector's (counting chord iterations as Newton ones gave
     ~2.7x as many on this curve)."""
-    from hbgear.continuation import CHORD_ITERATION_WORK, _jit_call
+    from hbgear.continuation import CHORD_ITERATION_WORK, _Compiled
 
     scale = 2.0
     python, compiled = _correctors(HB7, DUFFING, scale)
     i = len(duffing_h7) // 3
     y0, y1 = (np.append(duffing_h7.z[j], duffing_h7.p[j] / scale) for j in (i, i + 1))
     secant = (y1 - y0) / np.linalg.norm(y1 - y0)
-    chord = _jit_call(compiled, chord=True, scale=scale)
+    chord = _Compiled(compiled, chord=True, scale=scale)
     t = chord(y0, secant, secant @ y0, secant, 0, np.inf).tangent
     y_pred = y0 + 1.5 * np.linalg.norm(y1 - y0) * t
     got = chord(y_pred, t, t @ y_pred, t, 10, 1e-11)  # chord steps only
@@ -381,7 +381,7 @@ def test_compiled_line_search_equals_the_python_corrector():
     """Newton on atan(5 z) = 0.3 overshoots from |5 z| > 1.4: the backtracking line search runs.
     The compiled corrector (its line search as loop turns) lands where the Python one does,
     with the same iteration counts, and fails the same way where both fail."""
-    from hbgear.continuation import _jit_call, _jit_corrector, _python_corrector
+    from hbgear.continuation import _Compiled, _jit_corrector, _python_corrector
 
     def rj(z, p):
         return jnp.stack([jnp.arctan(5 * z[0]) - 0.3 * p]), jnp.array([[5 / (1 + 25 * z[0] ** 2)]]), jnp.array([-0.3])
@@ -390,7 +390,7 @@ def test_compiled_line_search_equals_the_python_corrector():
         return rj(z, p)[0]
 
     python = _python_corrector(rj, r, 1.0, 1)
-    compiled = _jit_call(_jit_corrector(rj, r, 1), chord=False, scale=1.0)
+    compiled = _Compiled(_jit_corrector(rj, r, 1), chord=False, scale=1.0)
     row = np.array([0.0, 1.0])
     for z0 in (0.6, 0.8, 1.3, -0.6):
         y = np.array([z0, 1.0])
