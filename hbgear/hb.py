@@ -97,7 +97,7 @@ class HarmonicBalance:
             s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
             phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
             return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None
-        breakpoints = tuple(np.round(np.asarray(system.breakpoints(p, np), dtype=float), 15))
+        breakpoints = _breakpoint_key(system, p)
         key = (breakpoints, max_mesh_order)
         if key not in _QUADRATURE_CACHE:
             if len(_QUADRATURE_CACHE) > 64:
@@ -276,14 +276,15 @@ class HarmonicBalance:
         """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_sample_points`)."""
         if system.is_linear:
             return jnp.zeros(self.size)
-        s, q, qd, (weight, delta) = self._sample_points(x, velocity, system, p)
+        s, q, qd, (_, _, weight, delta) = self._sample_points(x, velocity, system, p)
         values = system.force(s, q, qd, p, "nonlinear", extra, jnp)
         N = self.samples
         return (fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta).reshape(self.size)
 
     def _sample_points(self, x, velocity, system, p):
         r"""Where ``Q_nl`` is evaluated: the ``N`` uniform samples of the base period, then each
-        candidate jump phase just after and just before it; returns ``(s, q, q', (weight, delta))``.
+        candidate jump phase just after and just before it; returns ``(s, q, q', layout)``, the
+        layout of :meth:`_jump_layout`.
 
         ``Q_nl`` jumps where the load shares do (a pair enters or leaves contact, at known mesh
         phases): sampled uniformly, a jump aliases at ``O(1/N)``. With ``J_c`` the jump at base
@@ -299,13 +300,13 @@ class HarmonicBalance:
         A jump whose phase the state decides (a Coulomb law's ``V_s = 0``) stays ``O(1/N)``.
         """
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
-        sides, at_c, weight, delta = self._jump_layout(system, p)
+        layout = sides, at_c, _, _ = self._jump_layout(system, p)
         xc, vc = x.reshape(n, self.block), velocity.reshape(n, self.block)
         q_c, v_c = xc @ at_c.T, vc @ at_c.T  # (ndof, C): the state at the jump phases
         s = jnp.concatenate([jnp.mod(jnp.arange(N) * nu / N, 1.0), sides])
         q = jnp.concatenate([fourier.synthesize(xc, H, N, jnp), q_c, q_c], axis=1)
         qd = jnp.concatenate([fourier.synthesize(vc, H, N, jnp), v_c, v_c], axis=1)
-        return s, q, qd, (weight, delta)
+        return s, q, qd, layout
 
     def _jump_layout(self, system, p):
         """``(sides, at_c, weight, delta)`` of :meth:`_sample_points`: the mesh phases just after
@@ -316,7 +317,7 @@ class HarmonicBalance:
         declares ``coefficients_independent_of_parameter``), else in the trace.
         """
         if getattr(system, "coefficients_independent_of_parameter", False) and not _has_tracer(system):
-            breakpoints = tuple(np.round(np.ravel(np.asarray(system.breakpoints(1.0, np), dtype=float)), 15))
+            breakpoints = _breakpoint_key(system, 1.0)
             key = (self, breakpoints)
             if key not in _JUMP_CACHE:
                 if len(_JUMP_CACHE) > 64:
@@ -400,8 +401,7 @@ class HarmonicBalance:
         """
         n, H, N = self.ndof, self.harmonics, self.samples
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
-        s, q, qd, (weight, delta) = self._sample_points(x, (x.reshape(n, self.block) @ d.T).ravel(), system, p)
-        _, at_c, _, _ = self._jump_layout(system, p)
+        s, q, qd, (_, at_c, weight, delta) = self._sample_points(x, (x.reshape(n, self.block) @ d.T).ravel(), system, p)
 
         def f(qq, vv):
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
@@ -490,6 +490,12 @@ class HarmonicBalance:
         d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
         d1 = (jv + 2 * jnp.kron(mass, d)) * xs
         return jz * xs, d1, d2
+
+
+def _breakpoint_key(system, p) -> tuple:
+    """The system's breakpoints at `p` as a hashable key (rounded to 1e-15: equal geometries
+    share their cached rules and layouts)."""
+    return tuple(np.round(np.ravel(np.asarray(system.breakpoints(p, np), dtype=float)), 15))
 
 
 def _jumps(values, weight):
