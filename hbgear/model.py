@@ -411,7 +411,7 @@ class GearPairModel:
             delta = delta + 0.5 * self.backlash_m
         if self.boundary != "spring":
             return delta, 0.0 * omega_pinion
-        closed = self.static_windup(omega_pinion, xp)
+        closed = self._closed_form_windup(omega_pinion, xp)
         if closed is not None:
             return delta, closed
         q = xp.stack([delta, 0.0 * s])
@@ -420,11 +420,17 @@ class GearPairModel:
         return delta, xp.sum(w * force[1]) / self.spring_stiffness_N_per_m
 
     def static_windup(self, omega_pinion, xp=np):
-        """The soft spring's wind-up ``u_s`` [m] of :meth:`static_state` alone, without its
-        quadrature: zero unless "spring"; in closed form for the sgn and atan laws (``None`` for
-        the others, then ``static_state(...)[1]`` integrates it)."""
+        """The soft spring's wind-up ``u_s`` [m] of :meth:`static_state` alone: zero unless
+        "spring", in closed form for the sgn and atan laws (no quadrature rule, no static DTE),
+        else by :meth:`static_state`'s quadrature."""
         if self.boundary != "spring":
             return 0.0 * omega_pinion
+        closed = self._closed_form_windup(omega_pinion, xp)
+        return closed if closed is not None else self.static_state(omega_pinion, xp)[1]
+
+    def _closed_form_windup(self, omega_pinion, xp=np):
+        """``k_u u_s = T_p / R_bp + < T_fp/R_bp + T_fg/R_bg >`` with the closed-form mean (``None``
+        for laws without one)."""
         closed = self._mean_static_friction_force(omega_pinion, xp)
         if closed is None:
             return None

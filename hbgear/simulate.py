@@ -357,8 +357,7 @@ class _Integrator:
         self.tm = tm = 2.0 * math.pi / wm
         self.ndof = ndof = model.ndof
         self.minv = minv = np.linalg.inv(np.asarray(model.mass_matrix(), dtype=float))
-        _, u_static = model.static_state(omega)
-        self.u_static = float(u_static)
+        self.u_static = float(model.static_windup(omega))
 
         k_mean = float(model.k_mean_N_per_m)
         wn = math.sqrt(k_mean / float(model.mass_equivalent_kg))

@@ -111,8 +111,7 @@ class PeriodicSolution:
             reaction = float(z[slot] * system.force_scale)
             x = x.copy()
             x[slot] = 0.0
-        u_static = model.static_windup(omega_pinion)
-        u_static = float(model.static_state(omega_pinion)[1] if u_static is None else u_static)
+        u_static = float(model.static_windup(omega_pinion))
         return cls(
             model=model,
             omega_pinion=float(omega_pinion),

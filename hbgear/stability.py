@@ -413,7 +413,7 @@ def monodromy_variational(
         reaction = float(solution_or_state_fn.reaction_force_N)
     else:
         state = solution_or_state_fn
-        u_static = float(model.static_state(omega)[1]) if model.boundary == "spring" else 0.0
+        u_static = float(model.static_windup(omega))
         reaction = 0.0
     n = model.ndof
     jac = _force_jacobians()

@@ -125,7 +125,7 @@ class GearSystem:
         # the spring's static wind-up enters the constant terms only (not the "nonlinear" part),
         # and costs a quadrature of its own: skip it where it is not used
         needs_windup = model.boundary == "spring" and part != "nonlinear"
-        u_static = model.static_state(omega, xp)[1] if needs_windup else 0.0
+        u_static = model.static_windup(omega, xp) if needs_windup else 0.0
         return model.generalized_force(s, q, qd, omega, part, u_static, extra, xp)
 
 

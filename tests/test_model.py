@@ -207,3 +207,4 @@ def test_static_windup_closed_form_equals_the_quadrature(overrides):
     u_static = model.static_state(3000 * 2 * math.pi / 60)[1]
     expected = (model.torque_pinion_Nm / model.base_radius_pinion_m + float(closed(3000 * 2 * math.pi / 60)))
     assert float(u_static) == pytest.approx(expected / model.spring_stiffness_N_per_m, rel=1e-15)
+    assert model.static_windup(3000 * 2 * math.pi / 60) == u_static  # u_s alone: the same value
