@@ -88,7 +88,13 @@ def gear_problem():
     w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
     start = solve_periodic(model, w0, harmonics=H, samples=N, tolerance=tol)
     hb, system = HarmonicBalance(model.ndof, H, 1, N), GearSystem(model)
-    rj, r = gear_residual_functions(hb, system)
+    rj3, r3, fixed = gear_residual_functions(hb, system)
+
+    def rj(z, p):  # bound here: the versions compared need not know continuation's `args`
+        return rj3(z, p, *fixed)
+
+    def r(z, p):
+        return r3(z, p, *fixed)
 
     def method(module, **kw):
         base = frc_method(w0, w1)

@@ -77,15 +77,16 @@ def hb_curve(model, rpm0, rpm1, repeats):
     start = solve_periodic(model, w0, harmonics=H, samples=SAMPLES, tolerance=TOL)
     b = time.perf_counter()
     hb, system = HarmonicBalance(model.ndof, H, 1, SAMPLES), GearSystem(model)
-    rjp, res = gear_residual_functions(hb, system)
-    rjp(start.z, w0)[0].block_until_ready()
-    res(start.z, w0).block_until_ready()
+    rjp, res, fixed = gear_residual_functions(hb, system)
+    rjp(start.z, w0, *fixed)[0].block_until_ready()
+    res(start.z, w0, *fixed).block_until_ready()
     c = time.perf_counter()
     method = hb_method(w0, w1)
     times, branch = [], None
     for _ in range(repeats + 1):  # the first run compiles the corrector
         t = time.perf_counter()
-        branch = continuation(rjp, res, start.z, w0, w1, method, max_points=6000, tolerance=TOL, progress=False)
+        branch = continuation(rjp, res, start.z, w0, w1, method, max_points=6000, tolerance=TOL, progress=False,
+                              args=fixed)
         times.append(time.perf_counter() - t)
     curve = statistics.median(times[1:])
     return {

@@ -108,14 +108,14 @@ def breakdown(model, hb, system, rpm0, rpm1):
 
     w0, w1 = rpm_to_rad_s(rpm0), rpm_to_rad_s(rpm1)
     start = solve_periodic(model, w0, harmonics=H, samples=SAMPLES, tolerance=TOL)
-    rjp, res = gear_residual_functions(hb, system)
+    rjp, res, fixed = gear_residual_functions(hb, system)
     timer = Timer()
 
     def rjp_np(z, p):
-        return tuple(np.asarray(x) for x in jax.block_until_ready(rjp(z, p)))
+        return tuple(np.asarray(x) for x in jax.block_until_ready(rjp(z, p, *fixed)))
 
     def res_np(z, p):
-        return np.asarray(jax.block_until_ready(res(z, p)))
+        return np.asarray(jax.block_until_ready(res(z, p, *fixed)))
 
     rjp_np(start.z, w0), res_np(start.z, w0)  # compiled
     with timed_linalg(timer):
@@ -137,7 +137,8 @@ def breakdown(model, hb, system, rpm0, rpm1):
         times = []
         for _ in range(3):  # the first run compiles the corrector
             a = time.perf_counter()
-            run = continuation(rjp, res, start.z, w0, w1, method, max_points=6000, tolerance=TOL, progress=False)
+            run = continuation(rjp, res, start.z, w0, w1, method, max_points=6000, tolerance=TOL, progress=False,
+                               args=fixed)
             times.append(time.perf_counter() - a)
         compiled[label] = {"wall": statistics.median(times[1:]), "points": len(run),
                            "iterations": int(np.sum(run.iterations)), "rejected": run.rejected}

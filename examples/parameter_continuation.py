@@ -36,8 +36,9 @@ start = solve_periodic(model, omega, harmonics=24, samples=512)
 
 hb = HarmonicBalance(model.ndof, 24, 1, 512)
 system = GearSystem(model, omega_pinion=omega, parameter="torque_pinion_Nm")
-branch = continuation(*gear_residual_functions(hb, system), start.z, t_start, t_stop,
-                      PseudoArclength(ds=0.02, ds_max=0.1), max_points=400, progress=True)
+residual_and_jacobians, residual, fixed = gear_residual_functions(hb, system)
+branch = continuation(residual_and_jacobians, residual, start.z, t_start, t_stop,
+                      PseudoArclength(ds=0.02, ds_max=0.1), max_points=400, progress=True, args=fixed)
 print(f"{branch.status.name}: {len(branch)} points, folds at {np.round(branch.fold_p, 1)} N m")
 
 # DTE (coefficients z are in units of the start model's static deflection N/k_mean)

@@ -462,10 +462,10 @@ def continue_period_doubled(
                    f"({leg.status.name}: {leg.message})")
         return SubharmonicBranch(omega, zs, amp, hb2, model, point, False, leg.status, message, phi)
     k = int(crossed[0])
-    both_p, resid_p = gear_residual_functions(hb2, system)
+    both_p, resid_p, fixed = gear_residual_functions(hb2, system)
     start = max(k - 1, 0)
     last = continuation(both_p, resid_p, zs[start], float(omega[start]), omega_end,
-                        frc_method(w_star, omega_end), max_points=max_points, tolerance=tolerance)
+                        frc_method(w_star, omega_end), max_points=max_points, tolerance=tolerance, args=fixed)
     z_last = np.asarray(last.z)
     amp_last = z_last @ phi - offset
     omega = np.concatenate([omega[: start + 1], np.asarray(last.p)[1:]])
@@ -551,9 +551,10 @@ def backlash_frc(
     w0, w1 = rpm_to_rad_s(rpm_start), rpm_to_rad_s(rpm_stop)
     start = solve_periodic(model, w0, harmonics=harmonics, samples=samples, tolerance=tolerance)
     hb = HarmonicBalance(model.ndof, harmonics, 1, samples)
-    both, resid = gear_residual_functions(hb, GearSystem(model))
+    both, resid, fixed = gear_residual_functions(hb, GearSystem(model))
     method = frc_method(w0, w1, None if step_rpm is None else rpm_to_rad_s(step_rpm))
-    branch = continuation(both, resid, start.z, w0, w1, method, max_points=max_points, tolerance=tolerance)
+    branch = continuation(both, resid, start.z, w0, w1, method, max_points=max_points, tolerance=tolerance,
+                          args=fixed)
     scale = float(GearSystem(model).displacement_scale)
     p2p = np.array([_dense_p2p_um(z, hb, scale) for z in branch.z])
     x = np.asarray(branch.z).reshape(len(branch), model.ndof, hb.block)[:, 0, 1:] * scale

@@ -33,6 +33,7 @@ from __future__ import annotations
 import enum
 import math
 import sys
+import time
 import warnings
 from dataclasses import dataclass
 from typing import Callable, NamedTuple
@@ -151,7 +152,9 @@ class Branch:
     `iterations` (n,) corrector iterations; `residual` (n,) ``max |R|``; `tangent_p` (n,)
     ``p``-component of the unit tangent in scaled units (its sign is the direction of travel in
     ``p``; it changes sign at folds); `ds` (n,) arclength step that reached the point;
-    `status` :class:`Status`; `message`; `parameter_scale` ``p_ref``; `rejected` steps refused.
+    `status` :class:`Status`; `message`; `parameter_scale` ``p_ref``; `rejected` steps refused;
+    `start_seconds` the wall time of the start (with `jit_step`: the compilation of the corrector
+    on its first use, then Newton at ``p0`` and the first tangent).
     """
 
     p: np.ndarray
@@ -165,6 +168,7 @@ class Branch:
     message: str
     parameter_scale: float
     rejected: int = 0
+    start_seconds: float = 0.0
 
     def __post_init__(self):
         for name in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds"):
@@ -333,7 +337,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         return (xp.zeros((size + 1, size + 1)), xp.zeros(size + 1, np.int32), xp.zeros(size + 1), previous,
                 xp.asarray(False))
 
-    def attempt(y_pred, row, target, previous, max_iter, tolerance, factor, scale):
+    def attempt(y_pred, row, target, previous, max_iter, tolerance, factor, scale, args):
         """One corrector run from ``y_pred`` on ``R(y) = 0``, ``row . y = target``:
         ``(y, max|R|, Newton iterations, chord iterations, status, tangent, factor)``; `factor`
         is the LU ``(lu, piv, v, previous_f, usable)`` of the last converged point, for the chord
@@ -348,13 +352,13 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         # The callables are traced in (z, p) only: whatever they close over stays outside the
         # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
         def evaluate(y):
-            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale)
+            r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale, *args)
             jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
                                    scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
             return jnp.asarray(r, dtype=float).reshape(size), jac
 
         def residual_of(y):
-            return jnp.asarray(residual(y[:-1], y[-1] * scale), dtype=float).reshape(size)
+            return jnp.asarray(residual(y[:-1], y[-1] * scale, *args), dtype=float).reshape(size)
 
         def tangent(jac, previous):
             """Unit tangent from ``[J; previous] t = e``, and that LU (``ok`` = it is usable)."""
@@ -451,7 +455,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
 
     @jax.jit
     def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
-                controls):
+                controls, args=()):
         """Corrector runs from ``y_pred`` and then, while each is a regular continuation step from
         ``(y0, t0, ds0)`` and fewer than `budget` were taken, the next predictor-corrector steps
         with the step-size control of :func:`continuation` (`controls` = ``ds_min, ds_max,
@@ -477,7 +481,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
             f = s["factor"]
             y, norm, newton_it, chord_it, status, t, new_factor = attempt(
                 s["y_pred"], s["row"], s["target"], s["previous"], max_iter, tolerance,
-                f[:4] + (f[4] & use_chord,), scale)
+                f[:4] + (f[4] & use_chord,), scale, args)
             converged = status == 0
             factor = jax.tree.map(lambda a, b: jnp.where(converged, a, b), new_factor, s["factor"])
             angle = jnp.degrees(jnp.arccos(jnp.clip(t @ s["t"], -1.0, 1.0)))
@@ -513,7 +517,7 @@ class _Compiled:
     interface of :func:`_python_corrector`) or a :meth:`segment` of regular steps; with `chord`
     it keeps the LU of the last converged point for the next call."""
 
-    def __init__(self, compiled, chord: bool, scale: float, controls=None):
+    def __init__(self, compiled, chord: bool, scale: float, controls=None, args=()):
         import jax
 
         self._jax = jax
@@ -523,6 +527,7 @@ class _Compiled:
         self.last = None
         self.empty = None
         self.no_factor = no_factor
+        self.args = tuple(args)
 
     def _factor(self, previous):
         if self.chord and self.last is not None:
@@ -535,7 +540,7 @@ class _Compiled:
     def _run(self, y_pred, row, target, previous, max_iter, tolerance, y0, t0, ds0, budget):
         return self.advance(y_pred, row, float(target), previous, int(max_iter), float(tolerance),
                             self._factor(previous), self.scale, self.chord, y0, t0, float(ds0), int(budget),
-                            self.controls)
+                            self.controls, self.args)
 
     def _result(self, pending, factor, max_iter):
         """A corrector run's packed outcome -> _Point | _Failure (keeps the LU if converged)."""
@@ -596,6 +601,7 @@ def continuation(
     callback: Callable | None = None,
     progress: bool | None = None,
     start_iterations: int = 50,
+    args: tuple = (),
 ) -> Branch:
     r"""Follow the branch of ``R(z; p) = 0`` from ``(z0, p0)`` towards ``p_end``.
 
@@ -612,6 +618,9 @@ def continuation(
       the run (:attr:`Status.STOPPED`).
     - `progress`: a tqdm bar on stderr; ``None`` = only when stderr is a terminal.
     - `start_iterations`: Newton iterations for the starting point.
+    - `args`: extra arguments (a tuple of JAX pytrees) passed to both functions after ``(z,
+      p)``. With `jit_step` they are arguments of the compiled corrector, not constants in it:
+      new values (a new model's parameters) reuse the compiled program and its disk cache.
 
     **Returns:** a :class:`Branch`; failures are its `status` and `message`, never exceptions.
     """
@@ -626,17 +635,26 @@ def continuation(
     size = z0.size
     max_parameter_step = math.inf if m.max_parameter_step is None else m.max_parameter_step
 
+    args = tuple(args)
+    compiled_functions = (residual_and_jacobians, residual)
+    if args:
+        def residual_and_jacobians(z, p, _f=residual_and_jacobians):
+            return _f(z, p, *args)
+
+        def residual(z, p, _f=residual):
+            return _f(z, p, *args)
+
     python_correct = _python_corrector(residual_and_jacobians, residual, scale, size)
     corrector = [python_correct]
+    key = compiled_functions + (size,)
     if m.jit_step:
-        key = (residual_and_jacobians, residual, size)
         if key not in _JIT_CACHE:  # the same callables again (e.g. repeated runs): no new trace
             if len(_JIT_CACHE) >= 8:
                 _JIT_CACHE.pop(next(iter(_JIT_CACHE)))
-            _JIT_CACHE[key] = _jit_corrector(residual_and_jacobians, residual, size)
+            _JIT_CACHE[key] = _jit_corrector(*compiled_functions, size)
         controls = (m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations, max_parameter_step,
                     p_end / scale, direction, p0 / scale)
-        corrector[0] = _Compiled(_JIT_CACHE[key], m.chord, scale, controls)
+        corrector[0] = _Compiled(_JIT_CACHE[key], m.chord, scale, controls, args)
 
     def correct(y_pred, row, target, max_iter, previous, tol=tolerance):
         """Newton on ``R(y) = 0``, ``row . y = target``; a _Point (with the tangent oriented
@@ -654,7 +672,7 @@ def continuation(
                       f"{str(error).splitlines()[0] if str(error) else ''}); using the Python corrector",
                       RuntimeWarning, stacklevel=4)
         corrector[0] = python_correct
-        _JIT_CACHE.pop((residual_and_jacobians, residual, size), None)
+        _JIT_CACHE.pop(key, None)
 
     # -- storage -----------------------------------------------------------------------------
     rows = {k: [] for k in ("p", "z", "kind", "iterations", "residual", "tangent_p", "ds")}
@@ -672,6 +690,8 @@ def continuation(
             stopped[0] = True
 
     rejected = 0
+    start_seconds = 0.0
+    clock_start = time.perf_counter()
 
     def finish(status, detail=""):
         message = MESSAGES[status] if not detail else f"{detail}. {MESSAGES[status]}"
@@ -688,32 +708,44 @@ def continuation(
             message=message,
             parameter_scale=scale,
             rejected=rejected,
+            start_seconds=start_seconds,
         )
 
     # -- start -------------------------------------------------------------------------------
-    start = newton(
-        lambda z: residual_and_jacobians(z, float(p0))[:2],
-        lambda z: residual(z, float(p0)),
-        z0,
-        tolerance=tolerance,
-        max_iterations=start_iterations,
-    )
-    if not start.converged:
-        return finish(
-            Status.START_FAILED,
-            f"Newton at p = {p0:.9g} reached max|R| = {start.residual_norm:.3e} > tolerance {tolerance:.1e} "
-            f"after {start.iterations} iterations",
-        )
-    y = np.append(np.asarray(start.z, dtype=float), p0 / scale)
     seed = np.zeros(size + 1)
     seed[-1] = direction
-    first = correct(y, seed * direction, y[-1], 0, seed, tol=math.inf)  # R, J at the start: the tangent
-    if not isinstance(first, _Point):
-        return finish(Status.START_FAILED, f"the Jacobian at p = {p0:.9g} could not be evaluated: {first.reason}")
+    fixed_p = np.abs(seed)
+    first = None
+    if isinstance(corrector[0], _Compiled):
+        # Newton at fixed p0 and the tangent there in one call of the compiled corrector (no
+        # separately compiled residual functions needed); on failure the Python Newton below
+        first = correct(np.append(z0, p0 / scale), fixed_p, p0 / scale, start_iterations, seed)
+        first = first if isinstance(first, _Point) else None
+    if first is None:
+        start = newton(
+            lambda z: residual_and_jacobians(z, float(p0))[:2],
+            lambda z: residual(z, float(p0)),
+            z0,
+            tolerance=tolerance,
+            max_iterations=start_iterations,
+        )
+        if not start.converged:
+            return finish(
+                Status.START_FAILED,
+                f"Newton at p = {p0:.9g} reached max|R| = {start.residual_norm:.3e} > tolerance {tolerance:.1e} "
+                f"after {start.iterations} iterations",
+            )
+        y = np.append(np.asarray(start.z, dtype=float), p0 / scale)
+        first = correct(y, fixed_p, y[-1], 0, seed, tol=math.inf)  # R, J at the start: the tangent
+        if not isinstance(first, _Point):
+            return finish(Status.START_FAILED, f"the Jacobian at p = {p0:.9g} could not be evaluated: {first.reason}")
+        first = first._replace(iterations=start.iterations)
+    y = first.y
     t = first.tangent
     if t[-1] * direction <= 0:  # started on a fold or against the range: push towards p_end
         t = -t if t[-1] * direction < 0 else t
-    store(y, PointKind.START, start.iterations, first.r_norm, t, 0.0, p=float(p0))
+    store(y, PointKind.START, first.iterations, first.r_norm, t, 0.0, p=float(p0))
+    start_seconds = time.perf_counter() - clock_start
 
     bar = _progress_bar(progress, p0, p_end)
     ds = m.ds

@@ -27,7 +27,7 @@ from .newton import newton
 from .quadrature import mesh_period_rule
 from .system import GearSystem
 
-__all__ = ["PeriodicSolution", "solve_periodic", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
+__all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
 
 
 def rpm_to_rad_s(rpm):
@@ -185,6 +185,18 @@ def _quasi_static_start(model: GearPairModel, hb: HarmonicBalance, system: GearS
     if system.free_mean_dof is not None:
         z[system.free_mean_dof * hb.block] = 1.0  # T_g / R_bg ~ N, in units of force_scale = N
     return z
+
+
+def start_guess(model: GearPairModel, hb: HarmonicBalance, system: GearSystem) -> np.ndarray | None:
+    """A first guess for Newton at any speed, or ``None`` when only :func:`solve_periodic`'s
+    staged start will do: zeros for a linear model (Newton solves it in one step), the
+    quasi-static state for a non-linear model with linear contact (:func:`_quasi_static_start`,
+    where :func:`solve_periodic` starts too), ``None`` with backlash."""
+    if model.is_linear:
+        return np.zeros(hb.size)
+    if model.contact == "linear":
+        return _quasi_static_start(model, hb, system)
+    return None
 
 
 def _smoothing_field(model: GearPairModel):

@@ -7,6 +7,7 @@ over its primary resonance against independent ``solve_periodic`` calls.
 """
 
 import csv
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -204,8 +205,8 @@ def gear():
     start = solve_periodic(model, w0, harmonics=8, samples=64, tolerance=1e-12)
     from hbgear.commands.frc import frc_method, gear_residual_functions
 
-    rj, r = gear_residual_functions(HB_GEAR, GearSystem(model))
-    branch = continuation(rj, r, start.z, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000)
+    rj, r, fixed = gear_residual_functions(HB_GEAR, GearSystem(model))
+    branch = continuation(rj, r, start.z, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
     return model, branch
 
 
@@ -247,6 +248,36 @@ def test_frc_command_writes_the_curve(tmp_path, gear):
         assert set(np.unique(data[:, 7])) <= {0.0, 1.0}
         assert np.all(data[:, 6] > 0)
     assert (out / "frc.png").stat().st_size > 1000
+
+
+def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
+    """A second gear pair through the same functions reuses the compiled program (the model's
+    parameters are arguments of it, not constants) and gets its own curve, equal to the Python
+    corrector's; its start, corrected from `start_guess` inside the compiled corrector, is
+    solve_periodic's solution. Stale constants would give the first pair's curve."""
+    from hbgear.commands.frc import frc_method, gear_residual_functions
+    from hbgear.continuation import _JIT_CACHE
+    from hbgear.solve import start_guess
+
+    model, first = gear
+    other = model.replace(torque_pinion_Nm=1.7 * model.torque_pinion_Nm, damping_ratio=1.5 * model.damping_ratio)
+    w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
+    rj, r, fixed = gear_residual_functions(HB_GEAR, GearSystem(other))
+    assert rj is gear_residual_functions(HB_GEAR, GearSystem(model))[0]
+    compiled = _JIT_CACHE[(rj, r, HB_GEAR.size)][0]
+    programs = compiled._cache_size()
+    guess = start_guess(other, HB_GEAR, GearSystem(other))
+    branch = continuation(rj, r, guess, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
+    assert compiled._cache_size() == programs  # no new trace for the new pair
+    assert branch.status == Status.SUCCESS, branch.message
+    start = solve_periodic(other, w0, harmonics=8, samples=64, tolerance=1e-12)
+    assert np.max(np.abs(branch.z[0] - start.z)) <= 1e-9 * np.max(np.abs(start.z))
+    python = continuation(rj, r, start.z, w0, w1, dataclasses.replace(frc_method(w0, w1), jit_step=False, chord=False),
+                          tolerance=1e-12, max_points=4000, args=fixed)
+    assert len(branch) == len(python)
+    np.testing.assert_allclose(branch.p, python.p, rtol=1e-9)
+    np.testing.assert_allclose(branch.z, python.z, atol=1e-8 * np.max(np.abs(python.z)))
+    assert np.max(fundamental(branch)) < 0.8 * np.max(fundamental(first))  # more damping: a lower peak
 
 
 # ---------------------------------------------------------------------------- jit_step

@@ -42,6 +42,7 @@ in frc.json and a warning on stderr; the ``nu = 1`` curve is kept and the exit s
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -56,7 +57,7 @@ from ..continuation import IllinoisBracket, PseudoArclength, Status, continuatio
 from ..errors import ConvergenceError
 from ..hb import HarmonicBalance
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
-from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
+from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic, start_guess
 from ..system import GearSystem
 
 __all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "frc_method", "gear_residual_functions", "plot_frc",
@@ -104,13 +105,25 @@ def add_arguments(parser) -> None:
 
 
 def gear_residual_functions(hb: HarmonicBalance, system):
-    """``(residual_and_jacobians, residual)`` in the form :func:`~hbgear.continuation.continuation` takes."""
+    """``(residual_and_jacobians, residual, args)`` in the form
+    :func:`~hbgear.continuation.continuation` takes: ``continuation(rj, r, ..., args=args)``.
 
-    def residual_and_jacobians(z, p):
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system)
+    The two functions take ``(z, p, system, quadrature)`` and are the same objects for every
+    system solved with `hb`; ``args = (system, its quadrature)``. The model's parameters are
+    thus arguments of the compiled corrector, not constants in it: a new gear pair with the
+    same structure (``H``, ``N``, laws, boundary) reuses the compiled program, in this process
+    and from the disk cache.
+    """
+    return (*_functions_of(hb), (system, hb.quadrature(system)))
 
-    def residual(z, p):
-        return hb.residual(jnp.asarray(z), p, system)
+
+@functools.lru_cache(maxsize=16)
+def _functions_of(hb: HarmonicBalance):
+    def residual_and_jacobians(z, p, system, quadrature):
+        return hb._residual_and_jacobians_jit(jnp.asarray(z), p, system, quadrature)
+
+    def residual(z, p, system, quadrature):
+        return hb._residual_jit(jnp.asarray(z), p, system, quadrature)
 
     return residual_and_jacobians, residual
 
@@ -135,13 +148,12 @@ def frc_method(omega_start, omega_stop, step_rad_s=None) -> PseudoArclength:
 
 
 def _harmonics(config, model, omega_start, omega_stop, nu):
-    """``(H, samples, start solution, description)``."""
+    """``(H, samples, start solution or None, description)``: with ``H`` from the config no
+    solution is computed here (the continuation corrects :func:`~hbgear.solve.start_guess`)."""
     so = config.solver
     if so.harmonics is not None:
         samples = so.time_samples + so.time_samples % nu
-        start = solve_periodic(model, omega_start, harmonics=so.harmonics, nu=nu, samples=samples,
-                               tolerance=so.tolerance, max_iterations=so.max_iterations)
-        return so.harmonics, samples, start, f"from the config ({so.harmonics})"
+        return so.harmonics, samples, None, f"from the config ({so.harmonics})"
     kw = dict(nu=nu, tolerance=so.tolerance, max_iterations=so.max_iterations)
     at_start, at_stop = auto_harmonics(model, omega_start, **kw), auto_harmonics(model, omega_stop, **kw)
     harmonics = max(at_start.harmonics, at_stop.harmonics)
@@ -498,9 +510,9 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
     if leg.status == Status.STOPPED and len(omega) >= 2:
         end = omega_lo if omega[-1] < omega_lo else omega_hi
         k = len(omega) - 2  # the last point inside the range
-        both_p, resid_p = gear_residual_functions(hb2, system)
+        both_p, resid_p, fixed = gear_residual_functions(hb2, system)
         last = continuation(both_p, resid_p, zs[k], float(omega[k]), end, frc_method(w_star, end),
-                            max_points=max_points, tolerance=tolerance)
+                            max_points=max_points, tolerance=tolerance, args=fixed)
         omega = np.concatenate([omega[: k + 1], np.asarray(last.p)[1:]])
         zs = np.concatenate([zs[: k + 1], np.asarray(last.z)[1:]])
         res = np.concatenate([res[: k + 1], np.asarray(last.residual)[1:]])
@@ -655,23 +667,33 @@ def run(config, args, out_dir) -> int:
     nu = so.subharmonic
     omega_start, omega_stop = rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop)
     harmonics, samples, start, harmonics_rule = _harmonics(config, model, omega_start, omega_stop, nu)
-    t_start = clock()
-
     hb = HarmonicBalance(model.ndof, harmonics, nu, samples)
     system = GearSystem(model)
-
-    residual_and_jacobians, residual = gear_residual_functions(hb, system)
-    residual_and_jacobians(start.z, omega_start)[0].block_until_ready()  # compile outside the timing
-    residual(start.z, omega_start).block_until_ready()
-    t_compile = clock()
-
+    residual_and_jacobians, residual, fixed = gear_residual_functions(hb, system)
     step = None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm)
     method = frc_method(omega_start, omega_stop, step)
-    branch = continuation(
-        residual_and_jacobians, residual, start.z, omega_start, omega_stop, method,
-        max_points=sw.max_points, tolerance=so.tolerance, progress=progress,
-    )
+
+    def solve_start():
+        return solve_periodic(model, omega_start, harmonics=harmonics, nu=nu, samples=samples,
+                              tolerance=so.tolerance, max_iterations=so.max_iterations)
+
+    def follow(z0, **kw):
+        return continuation(residual_and_jacobians, residual, z0, omega_start, omega_stop, method,
+                            max_points=sw.max_points, tolerance=so.tolerance, progress=progress, args=fixed, **kw)
+
+    guess = start_guess(model, hb, system) if start is None else None
+    if start is None and guess is None:
+        start = solve_start()
+    t_start = clock()
+    if guess is not None:  # Newton from the guess inside the continuation's compiled corrector
+        branch = follow(guess, start_iterations=so.max_iterations)
+        if branch.status == Status.START_FAILED:  # the staged start of solve_periodic (or its error)
+            start = solve_start()
+            t_start = clock()
+    if start is not None:
+        branch = follow(start.z)
     t_cont = clock()
+    t_compile = t_start + branch.start_seconds
 
     if getattr(args, "no_stability", False):
         floquet, stable = np.full(len(branch), np.nan), np.full(len(branch), np.nan)
@@ -787,7 +809,7 @@ def run(config, args, out_dir) -> int:
                   "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof},
         "timings_s": {
             "start_solution": t_start - t0,
-            "compile": t_compile - t_start,
+            "compile_and_start_point": t_compile - t_start,
             "continuation": t_cont - t_compile,
             "per_point_ms": 1e3 * (t_cont - t_compile) / n_steps,
             "stability": t_stab - t_cont,
