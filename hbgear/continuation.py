@@ -719,7 +719,12 @@ def continuation(
     if isinstance(corrector[0], _Compiled):
         # Newton at fixed p0 and the tangent there in one call of the compiled corrector (no
         # separately compiled residual functions needed); on failure the Python Newton below
-        first = correct(np.append(z0, p0 / scale), fixed_p, p0 / scale, start_iterations, seed)
+        y_guess = np.append(z0, p0 / scale)
+        try:
+            first = corrector[0](y_guess, fixed_p, p0 / scale, seed, start_iterations, tolerance)
+        except Exception:  # noqa: BLE001 -- e.g. a closure that fills a cache on its first call,
+            residual(z0, float(p0))  # which must be eager: call it once, then trace again
+            first = correct(y_guess, fixed_p, p0 / scale, start_iterations, seed)  # or fall back
         first = first if isinstance(first, _Point) else None
     if first is None:
         start = newton(

@@ -84,7 +84,12 @@ class HarmonicBalance:
         hit = _PREPARED.get((self, id(system)))
         if hit is not None and hit[0] is system:  # the same system object as last time
             return hit[1]
-        quad = self._prepare(system, p)
+        if _has_tracer((system, p)):
+            return self._prepare(system, p)
+        # concrete arrays even when first asked for inside a trace (a compiled caller's first
+        # call): the caches below must never hold tracers
+        with jax.ensure_compile_time_eval():
+            quad = self._prepare(system, p)
         if not isinstance(quad[0], jax.core.Tracer):
             if len(_PREPARED) > 16:
                 _PREPARED.clear()

@@ -250,6 +250,20 @@ def test_frc_command_writes_the_curve(tmp_path, gear):
     assert (out / "frc.png").stat().st_size > 1000
 
 
+def test_jit_step_traces_closures_that_fill_caches_on_their_first_call():
+    """HarmonicBalance builds its quadrature on the first eager call; a closure over a fresh
+    instance must still run compiled (no fall-back warning), with the start compiled too."""
+    import warnings
+
+    fresh = HarmonicBalance(1, 7, 1, 66)  # its own caches: nothing computed for it yet
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        branch = continuation(*problem(fresh, DUFFING), np.zeros(fresh.size), 0.5, 2.0,
+                              PseudoArclength(jit_step=True), tolerance=1e-10, max_points=2000)
+    assert branch.status == Status.SUCCESS, branch.message
+    assert len(branch.folds) == 2
+
+
 def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
     """A second gear pair through the same functions reuses the compiled program (the model's
     parameters are arguments of it, not constants) and gets its own curve, equal to the Python
