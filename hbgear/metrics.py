@@ -46,18 +46,22 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
       ``(ndof, n)`` [m], [m/s]; `weights`: quadrature weights over the period (sum 1).
     - `u_static`: the spring's static wind-up [m]; `reaction`: ``T_g/R_bg`` [N] (reaction).
 
+    Batches: ``q``, ``qd`` of shape ``(ndof, P, n)`` with `omega_pinion`, `u_static`, `reaction`
+    of shape ``(P, 1)`` and ``s`` of shape ``(1, n)`` give every read-out with shape ``(P,)``
+    (means and extremes are over the last axis).
+
     **Returns:** a dict with :data:`SUMMARY_KEYS` (µm, W, -).
     """
     w = weights
     delta = q[0]
-    mean = xp.sum(w * delta)
-    rms = xp.sqrt(xp.sum(w * (delta - mean) ** 2))
+    mean = xp.sum(w * delta, axis=-1)
+    rms = xp.sqrt(xp.sum(w * (delta - mean[..., None]) ** 2, axis=-1))
     mesh = model.mesh_force(s, q, qd, omega_pinion, xp)
     wp_tot, wg_tot = model.angular_velocities(qd, omega_pinion, nominal=False)
     t_fp, t_fg = model.friction_torques(s, q, qd, omega_pinion, xp)
-    friction_loss = -xp.sum(w * (t_fp * wp_tot + t_fg * wg_tot))
-    mesh_power = xp.sum(w * mesh * qd[0])
-    input_power = model.torque_pinion_Nm * xp.sum(w * wp_tot)
+    friction_loss = -xp.sum(w * (t_fp * wp_tot + t_fg * wg_tot), axis=-1)
+    mesh_power = xp.sum(w * mesh * qd[0], axis=-1)
+    input_power = model.torque_pinion_Nm * xp.sum(w * wp_tot, axis=-1)
     rbg = model.base_radius_gear_m
     if model.boundary == "torques":
         output_torque = model.torque_gear_Nm + 0.0 * delta
@@ -65,12 +69,12 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
         output_torque = rbg * (model.spring_stiffness_N_per_m * (q[1] + u_static) + model.spring_damping_Ns_per_m * qd[1])
     else:
         output_torque = rbg * reaction + 0.0 * delta
-    output_power = xp.sum(w * output_torque * wg_tot)
+    output_power = xp.sum(w * output_torque * wg_tot, axis=-1)
     return {
         "dte_mean_um": 1e6 * mean,
         "dte_rms_um": 1e6 * rms,
-        "dte_p2p_um": 1e6 * (xp.max(delta) - xp.min(delta)),
-        "dynamic_factor": xp.max(mesh) / model.normal_load_N,
+        "dte_p2p_um": 1e6 * (xp.max(delta, axis=-1) - xp.min(delta, axis=-1)),
+        "dynamic_factor": xp.max(mesh, axis=-1) / model.normal_load_N,
         "mean_input_power_W": input_power,
         "mean_output_power_W": output_power,
         "mean_power_loss_W": input_power - output_power,

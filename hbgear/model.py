@@ -229,9 +229,10 @@ class GearPairModel:
             return zero, zero
         order = xp.arange(1, amp.shape[0] + 1)
         phase = 2 * np.pi * order[:, None] * xp.ravel(s)[None] + xp.asarray(self.ste_phase_rad)[:, None]
-        eps = xp.sum(amp[:, None] * xp.cos(phase), axis=0)
-        deps = -omega_mesh * xp.sum((amp * order)[:, None] * xp.sin(phase), axis=0)
-        return xp.reshape(eps, xp.shape(s)), xp.reshape(deps, xp.shape(s))
+        eps = xp.reshape(xp.sum(amp[:, None] * xp.cos(phase), axis=0), xp.shape(s))
+        # omega_mesh may carry a batch axis that s does not (read-outs of many points)
+        deps = -omega_mesh * xp.reshape(xp.sum((amp * order)[:, None] * xp.sin(phase), axis=0), xp.shape(s))
+        return eps, deps
 
     def loaded_static_transmission_error(self, s, omega_mesh, xp=np):
         """Loaded STE fluctuation ``eps + N/k(s) - <N/k>`` [m] (LTI excitation, Eq. 10)."""

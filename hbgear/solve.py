@@ -21,13 +21,13 @@ import numpy as np
 from . import fourier
 from .errors import ConvergenceError
 from .hb import HarmonicBalance
-from .metrics import periodic_summary
+from .metrics import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
 from .newton import newton
 from .quadrature import mesh_period_rule
 from .system import GearSystem
 
-__all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
+__all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
 
 
 def rpm_to_rad_s(rpm):
@@ -73,44 +73,23 @@ class PeriodicSolution:
         """``(q, qd)`` at fractions of the base period, shapes ``(ndof, n)``."""
         tau = 2 * np.pi * np.asarray(base_fraction, dtype=float)
         k = np.arange(1, self.harmonics + 1)
-        return self._synthesize(np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
-
-    def _synthesize(self, cos, sin):
-        k = np.arange(1, self.harmonics + 1)
-        a, b = self.coefficients[:, 1::2], self.coefficients[:, 2::2]
-        q = self.coefficients[:, :1] + a @ cos + b @ sin
-        qd = self.base_frequency * ((b * k) @ cos - (a * k) @ sin)
-        return q, qd
+        return _synthesize(self.coefficients, self.base_frequency, np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
 
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
-        base, s, w, _, _ = _read_out_rule(self._breakpoints(), self.harmonics, self.nu)
+        base, s, w, _, _ = _read_out_rule(_breakpoints(self.model), self.harmonics, self.nu)
         return base, s, w
-
-    def _breakpoints(self):
-        return tuple(np.round(np.asarray(self.model.breakpoint_candidates(), dtype=float), 15))
 
     def summary(self) -> dict:
         """The INTERFACE read-outs (µm, W) from exact quadrature over the period."""
-        base, s, w, cos, sin = _read_out_rule(self._breakpoints(), self.harmonics, self.nu)
-        q, qd = self._synthesize(cos, sin)
-        out = periodic_summary(self.model, self.omega_pinion, s, q, qd, w, self.u_static_m, self.reaction_force_N)
-        dense = self._synthesize(*_dense_basis(self.harmonics))[0][0]
-        out["dte_p2p_um"] = max(out["dte_p2p_um"], 1e6 * float(np.ptp(dense)))
-        return {k: float(v) for k, v in out.items()}
+        out = _summaries(self.model, np.array([self.omega_pinion]), self.coefficients[None], self.harmonics, self.nu,
+                         np.array([self.u_static_m]), np.array([self.reaction_force_N]))
+        return {k: float(v[0]) for k, v in out.items()}
 
     @classmethod
     def from_z(cls, model, omega_pinion, z, hb, *, residual_norm=0.0, iterations=0) -> PeriodicSolution:
         """The solution of scaled unknowns `z` of the discretisation `hb` (reaction slot decoded)."""
-        system = GearSystem(model)
-        z = np.asarray(z, dtype=float)
-        x = z * system.displacement_scale
-        reaction = 0.0
-        if system.free_mean_dof is not None:
-            slot = system.free_mean_dof * hb.block
-            reaction = float(z[slot] * system.force_scale)
-            x = x.copy()
-            x[slot] = 0.0
+        coefficients, reaction = _decode(model, z, hb)
         u_static = float(model.static_windup(omega_pinion))
         return cls(
             model=model,
@@ -118,8 +97,8 @@ class PeriodicSolution:
             harmonics=hb.harmonics,
             nu=hb.nu,
             samples=hb.samples,
-            coefficients=x.reshape(model.ndof, hb.block),
-            reaction_force_N=reaction,
+            coefficients=coefficients,
+            reaction_force_N=float(reaction),
             u_static_m=u_static,
             residual_norm=float(residual_norm),
             iterations=int(iterations),
@@ -132,6 +111,69 @@ class PeriodicSolution:
         rows = [(0.0, 1e6 * float(mean), 0.0)]
         rows += [((k + 1) / self.nu, 1e6 * float(amp[k]), float(np.degrees(phase[k]))) for k in range(self.harmonics)]
         return rows
+
+
+def _decode(model: GearPairModel, z, hb: HarmonicBalance):
+    """Scaled unknowns ``z`` ``(..., size)`` -> coefficients [m] ``(..., ndof, 2H+1)`` and the
+    reaction force ``T_g/R_bg`` [N] ``(...)`` (its slot, the mean of ``u``, is zeroed)."""
+    system = GearSystem(model)
+    z = np.asarray(z, dtype=float)
+    x = z * float(system.displacement_scale)
+    reaction = np.zeros(z.shape[:-1])
+    if system.free_mean_dof is not None:
+        slot = system.free_mean_dof * hb.block
+        reaction = z[..., slot] * float(system.force_scale)
+        x = x.copy()
+        x[..., slot] = 0.0
+    return x.reshape(z.shape[:-1] + (model.ndof, hb.block)), reaction
+
+
+def _synthesize(coefficients, base_frequency, cos, sin):
+    """``(q, qd)`` at the points of the basis ``cos, sin`` ``(H, n)`` from coefficients
+    ``(..., ndof, 2H+1)``: shapes ``(..., ndof, n)``; `base_frequency` broadcasts against them."""
+    k = np.arange(1, cos.shape[0] + 1)
+    c = np.asarray(coefficients, dtype=float)
+    flat = c.reshape(-1, c.shape[-1])  # one matrix product for all points and coordinates
+    a, b = flat[:, 1::2], flat[:, 2::2]
+    basis = np.concatenate([cos, sin])
+    q = flat[:, :1] + np.concatenate([a, b], axis=1) @ basis
+    qd = np.concatenate([b * k, -a * k], axis=1) @ basis
+    return q.reshape(c.shape[:-1] + (-1,)), base_frequency * qd.reshape(c.shape[:-1] + (-1,))
+
+
+def _breakpoints(model: GearPairModel) -> tuple:
+    return tuple(np.round(np.asarray(model.breakpoint_candidates(), dtype=float), 15))
+
+
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
+    """:func:`~hbgear.metrics.periodic_summary` of ``P`` solutions at once (exact quadrature over
+    the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
+    [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
+    _, s, w, cos, sin = _read_out_rule(_breakpoints(model), harmonics, nu)
+    omega = np.asarray(omegas, dtype=float)[:, None]
+    base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
+    q, qd = _synthesize(coefficients, base_frequency, cos, sin)
+    out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
+                           np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
+    dense = _synthesize(coefficients[:, :1], 0.0, *_dense_basis(harmonics))[0][:, 0]
+    out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    return out
+
+
+#: Points per batch of :func:`read_outs` (bounds the work arrays to a few tens of MB).
+READ_OUT_BATCH = 512
+
+
+def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
+    """``PeriodicSolution.from_z(model, w, z, hb).summary()`` for every point ``(omegas[i],
+    zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary."""
+    omegas = np.asarray(omegas, dtype=float)
+    coefficients, reaction = _decode(model, zs, hb)
+    u_static = np.array([float(model.static_windup(w)) for w in omegas])
+    parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
+                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
+             for k in range(0, len(omegas), READ_OUT_BATCH)]
+    return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
 
 
 @lru_cache(maxsize=16)

@@ -294,3 +294,26 @@ def test_aft_jump_correction_converges_at_second_order(formulation):
     assert errors[512][0] > 1e-4 * scale  # the plain projection does alias
     assert errors[128][1] / errors[512][1] > 10  # O(1/N^2): 16 for N x 4 (plain: ~4)
     assert errors[512][1] < 0.02 * errors[512][0]
+
+
+@pytest.mark.parametrize("overrides, nu", [
+    (["friction.model=NLTV", "friction.law=arctan", "friction.formulation=B"], 1),
+    (["boundary.output=reaction", "friction.model=NLTV", "friction.law=arctan"], 2),
+    (["boundary.output=torques", "mesh.ste_amplitude_um=[1.0, 0.3]", "mesh.ste_phase_deg=[0.0, 40.0]"], 1),
+])
+def test_batched_read_outs_equal_each_point_summary(overrides, nu):
+    """`read_outs` (a curve's read-outs in batches) gives each point its own summary: no mixing
+    of points, the same reaction slot, wind-up and STE velocity per point."""
+    from hbgear.solve import PeriodicSolution, read_outs
+
+    model = build_model(load_config(EXAMPLE, overrides))
+    h, n = 8 * nu, 64 * nu
+    hb = HarmonicBalance(model.ndof, h, nu, n)
+    speeds = rpm_to_rad_s(np.array([3000.0, 7000.0, 13400.0]))
+    zs = np.array([solve_periodic(model, w, harmonics=h, nu=nu, samples=n).z for w in speeds])
+    batch = read_outs(model, speeds, zs, hb)
+    assert {len(v) for v in batch.values()} == {3}
+    for i, (w, z) in enumerate(zip(speeds, zs)):
+        for key, value in PeriodicSolution.from_z(model, w, z, hb).summary().items():
+            assert batch[key][i] == pytest.approx(value, rel=1e-11, abs=1e-9), (key, i)
+    assert len({round(float(v), 6) for v in batch["dte_rms_um"]}) == 3  # three different points

@@ -57,7 +57,8 @@ from ..continuation import IllinoisBracket, PseudoArclength, Status, continuatio
 from ..errors import ConvergenceError
 from ..hb import HarmonicBalance
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
-from ..solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, rpm_to_rad_s, solve_periodic, start_guess
+from ..solve import (PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, rpm_to_rad_s, solve_periodic,
+                     start_guess)
 from ..system import GearSystem
 
 __all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "frc_method", "gear_residual_functions", "plot_frc",
@@ -725,15 +726,14 @@ def run(config, args, out_dir) -> int:
     speed_rpm[0] = sw.speed_rpm_start  # exact ends (no rpm -> rad/s -> rpm rounding)
     if branch.success:
         speed_rpm[-1] = sw.speed_rpm_stop
-    summaries = [PeriodicSolution.from_z(model, p, z, hb, residual_norm=r, iterations=it).summary()
-                 for p, z, r, it in zip(branch.p, branch.z, branch.residual, branch.iterations)]
+    read = read_outs(model, branch.p, branch.z, hb)  # the summary of every point, batched
     table = np.column_stack([
         speed_rpm,
         np.asarray(branch.p) * model.teeth_pinion / (2 * math.pi),
-        [s["dte_mean_um"] for s in summaries],
-        [s["dte_rms_um"] for s in summaries],
-        [s["dte_p2p_um"] for s in summaries],
-        [s["dynamic_factor"] for s in summaries],
+        read["dte_mean_um"],
+        read["dte_rms_um"],
+        read["dte_p2p_um"],
+        read["dynamic_factor"],
         floquet,
         stable,
         np.full(len(branch), nu),
