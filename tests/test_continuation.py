@@ -294,6 +294,26 @@ def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
     assert np.max(fundamental(branch)) < 0.8 * np.max(fundamental(first))  # more damping: a lower peak
 
 
+def test_frc_falls_back_to_solve_periodic_when_the_start_guess_fails(tmp_path, monkeypatch):
+    """A start guess Newton cannot use (NaN here) costs only the detour: the curve is the same as
+    from the regular guess, started from solve_periodic's staged start."""
+    import hbgear.commands.frc as frc_module
+    from hbgear import cli
+
+    def run(out):
+        args = ["frc", str(EXAMPLE), "--out", str(out), "--no-progress", "--no-stability", "--no-period-doubling"]
+        for item in GEAR_OVERRIDES + ["sweep.speed_rpm_start=12000", "sweep.speed_rpm_stop=13000"]:
+            args += ["--set", item]
+        assert cli.main(args) == 0
+        return np.loadtxt(out / "frc.csv", delimiter=",", skiprows=1)
+
+    regular = run(tmp_path / "regular")
+    monkeypatch.setattr(frc_module, "start_guess", lambda model, hb, system: np.full(hb.size, np.nan))
+    detour = run(tmp_path / "detour")
+    assert detour.shape == regular.shape
+    np.testing.assert_allclose(detour[:, :6], regular[:, :6], rtol=1e-9)
+
+
 # ---------------------------------------------------------------------------- jit_step
 
 
