@@ -594,12 +594,13 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
                                                             label="Floquet multipliers (nu = 2)")
                 except ImportError:
                     mults, method2, warning2 = [None] * len(omega), None, "hbgear.stability unavailable"
-                for w, z, r, m in zip(omega, zs, res, mults):
-                    summ = PeriodicSolution.from_z(model, float(w), z, hb2).summary()
+                read = read_outs(model, omega, zs, hb2)
+                for i, (w, r, m) in enumerate(zip(omega, res, mults)):
                     floq = np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0)
                     st = np.nan if m is None else int(is_stable(m))
                     block.append([float(rad_s_to_rpm(w)), float(w) * model.teeth_pinion / (2 * math.pi),
-                                  summ["dte_mean_um"], summ["dte_rms_um"], summ["dte_p2p_um"], summ["dynamic_factor"],
+                                  *(float(read[key][i]) for key in ("dte_mean_um", "dte_rms_um", "dte_p2p_um",
+                                                                    "dynamic_factor")),
                                   floq, st, 2, float(r)])
                 rec.update(stability_method=method2, stability_warning=warning2)
             arr = np.array([b[:8] for b in block], dtype=float).reshape(len(block), 8)
