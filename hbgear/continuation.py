@@ -349,8 +349,9 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         ``max |R|``; on convergence one mode-0 turn evaluates the Jacobian there (for the
         tangent), on failure the Newton iteration restarts from the predictor.
         """
-        # The callables are traced in (z, p) only: whatever they close over stays outside the
-        # trace (e.g. HarmonicBalance's quadrature rule and frozen blocks come from its caches).
+        # The callables are traced in (z, p, *args): `args` are arguments of the compiled program
+        # (the gear pair and its quadrature for hbgear.commands.frc.gear_residual_functions),
+        # whatever they close over is a constant in it.
         def evaluate(y):
             r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale, *args)
             jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
