@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import shutil
 import sys
 import tempfile
 import time
@@ -45,10 +46,18 @@ def main(argv=None):
     parser.add_argument("--cache-dir", default=None,
                         help="compilation cache to use (default: a new empty one, so the first curve is cold)")
     args = parser.parse_args(argv)
-    q = args.quick
     # before hbgear is imported: it reads HBGEAR_CACHE_DIR once
-    os.environ["HBGEAR_CACHE_DIR"] = args.cache_dir or tempfile.mkdtemp(prefix="hbgear-bench-cache-")
+    own_cache = None if args.cache_dir else tempfile.mkdtemp(prefix="hbgear-bench-cache-")
+    os.environ["HBGEAR_CACHE_DIR"] = args.cache_dir or own_cache
     os.environ.pop("HBGEAR_NO_CACHE", None)
+    try:
+        return _run(args.quick)
+    finally:
+        if own_cache:
+            shutil.rmtree(own_cache, ignore_errors=True)
+
+
+def _run(q):
     import bench_duffing_tools
     import bench_frc_vs_ti
     import bench_newton_breakdown
