@@ -99,7 +99,8 @@ class PseudoArclength:
       to ``SEGMENT_POINTS`` per call, with the same predictor, acceptance tests and step-size
       control) inside it; any other step (refused, failed, a fold, the end of the range) goes
       back to the Python loop. Needs residual functions that
-      JAX can trace in ``(z, p)`` (e.g. :meth:`hbgear.hb.HarmonicBalance.residual_and_jacobians`
+      JAX can trace in ``(z, p, *args)`` (e.g. :func:`hbgear.commands.frc.gear_residual_functions`,
+      the gear pair in ``args``, or :meth:`hbgear.hb.HarmonicBalance.residual_and_jacobians`
       with the system closed over); otherwise the run falls back to the Python corrector with
       a warning. Same algorithm, same points to rounding (LU by XLA instead of scipy); it
       removes the per-evaluation and per-step dispatch and conversion overhead, which dominates

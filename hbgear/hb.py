@@ -369,17 +369,20 @@ class HarmonicBalance:
         return r / system.force_scale
 
     # -- public entry points: the quadrature kernel is fetched outside the traced code ----------
-    def residual(self, z, p, system):
+    # (or given: `quadrature` = self.quadrature(system) computed once by a caller that traces
+    # `system` itself, e.g. as an argument of a compiled continuation corrector)
+    def residual(self, z, p, system, quadrature=None):
         """Scaled residual ``R(z; p)``, shape ``(size,)``."""
-        return self._residual_jit(z, p, system, self.quadrature(system))
+        return self._residual_jit(z, p, system, self.quadrature(system) if quadrature is None else quadrature)
 
     def residual_and_jacobian(self, z, p, system):
         """``(R, dR/dz)`` at fixed ``p`` (Newton): the affine part's Jacobian is its operator."""
         return self._residual_and_jacobian_jit(z, p, system, self.quadrature(system))
 
-    def residual_and_jacobians(self, z, p, system):
+    def residual_and_jacobians(self, z, p, system, quadrature=None):
         """``(R, dR/dz, dR/dp)`` (continuation)."""
-        return self._residual_and_jacobians_jit(z, p, system, self.quadrature(system))
+        return self._residual_and_jacobians_jit(z, p, system,
+                                                self.quadrature(system) if quadrature is None else quadrature)
 
     def hill_matrices(self, z, p, system):
         """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import fourier
 from .errors import ConvergenceError
-from .hb import HarmonicBalance
+from .hb import HarmonicBalance, _breakpoint_key
 from .metrics import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
 from .newton import newton
@@ -77,7 +77,8 @@ class PeriodicSolution:
 
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
-        base, s, w, _, _ = _read_out_rule(_breakpoints(self.model), self.harmonics, self.nu)
+        base, s, w, _, _ = _read_out_rule(_breakpoint_key(GearSystem(self.model), self.omega_pinion), self.harmonics,
+                                          self.nu)
         return base, s, w
 
     def summary(self) -> dict:
@@ -141,16 +142,12 @@ def _synthesize(coefficients, base_frequency, cos, sin):
     return q.reshape(c.shape[:-1] + (-1,)), base_frequency * qd.reshape(c.shape[:-1] + (-1,))
 
 
-def _breakpoints(model: GearPairModel) -> tuple:
-    return tuple(np.round(np.asarray(model.breakpoint_candidates(), dtype=float), 15))
-
-
 def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
     """:func:`~hbgear.metrics.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
     [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
-    _, s, w, cos, sin = _read_out_rule(_breakpoints(model), harmonics, nu)
     omega = np.asarray(omegas, dtype=float)[:, None]
+    _, s, w, cos, sin = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
     q, qd = _synthesize(coefficients, base_frequency, cos, sin)
     out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
@@ -270,14 +267,15 @@ def solve_periodic(
     hb, system = _problem(model, harmonics, nu, samples)
     omega = float(omega_pinion)
     tried = []
+    guess = start_guess(model, hb, system) if z0 is None else None
     if model.is_linear:
-        z = np.zeros(hb.size) if z0 is None else np.asarray(z0)
+        z = guess if z0 is None else np.asarray(z0)
         result = _newton(hb, system, omega, z, tolerance, 3)
         tried.append("direct linear solve")
     else:
         result = None
-        if z0 is None and model.contact == "linear":
-            z0 = _quasi_static_start(model, hb, system)
+        if guess is not None:
+            z0 = guess
             result = _newton(hb, system, omega, z0, tolerance, min(max_iterations, _STATIC_START_ITERATIONS))
             tried.append(f"Newton from the quasi-static state ({result.iterations} iterations)")
             z0 = z0 if result.converged else None

@@ -121,10 +121,10 @@ def gear_residual_functions(hb: HarmonicBalance, system):
 @functools.lru_cache(maxsize=16)
 def _functions_of(hb: HarmonicBalance):
     def residual_and_jacobians(z, p, system, quadrature):
-        return hb._residual_and_jacobians_jit(jnp.asarray(z), p, system, quadrature)
+        return hb.residual_and_jacobians(jnp.asarray(z), p, system, quadrature)
 
     def residual(z, p, system, quadrature):
-        return hb._residual_jit(jnp.asarray(z), p, system, quadrature)
+        return hb.residual(jnp.asarray(z), p, system, quadrature)
 
     return residual_and_jacobians, residual
 
