@@ -455,34 +455,37 @@ class GearPairModel:
         if name == "none":
             return 0.0 * omega_pinion
         wp, wg, _ = self.speeds(omega_pinion)
+        # the three pieces on the last axis, (slot, from, to, load share): two pairs until
+        # Gamma - 1, then slot 0 alone -- as arrays, so that the compiled residual evaluates them
+        # in a few vector kernels instead of ~50 scalar ones
+        wp, wg = xp.asarray(wp)[..., None], xp.asarray(wg)[..., None]
         rbp, rbg, pitch = self.base_radius_pinion_m, self.base_radius_gear_m, self.base_pitch_m
         slope = pitch * (wp + wg)  # d V_s / d s
         beta = -pitch * (1.0 / rbp + 1.0 / rbg)  # d arm / d s
         moving = xp.abs(slope) > 0
         slope_safe = xp.where(moving, slope, 1.0)
         g1 = self.contact_ratio - 1.0
-        total = 0.0 * omega_pinion
-        # (slot, from, to, load share): two pairs until Gamma - 1, then slot 0 alone
-        for slot, a, b, share in ((0, 0.0, g1, 0.5), (1, 0.0, g1, 0.5), (0, g1, 1.0, 1.0)):
-            xi0 = self.contact_start_m + pitch * slot  # xi_p at s = 0
-            gamma = xi0 * (wp + wg) - self.line_of_action_m * wg
-            alpha = self.line_of_action_m / rbg - xi0 * (1.0 / rbp + 1.0 / rbg)
-            if name == "arctan":
-                v0 = self.friction.v0
-                big_a, big_b = alpha - beta * gamma / slope_safe, beta * v0 / slope_safe
+        zero = 0.0 * g1
+        lower, upper = xp.stack([zero, zero, g1]), xp.stack([g1, g1, zero + 1.0])
+        slot, share = np.array([0.0, 1.0, 0.0]), np.array([0.5, 0.5, 1.0])
+        xi0 = self.contact_start_m + pitch * slot  # xi_p at s = 0
+        gamma = xi0 * (wp + wg) - self.line_of_action_m * wg
+        alpha = self.line_of_action_m / rbg - xi0 * (1.0 / rbp + 1.0 / rbg)
+        if name == "arctan":
+            v0 = self.friction.v0
+            big_a, big_b = alpha - beta * gamma / slope_safe, beta * v0 / slope_safe
 
-                def antiderivative(s):
-                    x = (gamma + slope_safe * s) / v0
-                    at = xp.arctan(x)
-                    return big_a * (x * at - 0.5 * xp.log1p(x * x)) + big_b * 0.5 * ((x * x + 1.0) * at - x)
+            def antiderivative(s):
+                x = (gamma + slope_safe * s) / v0
+                at = xp.arctan(x)
+                return big_a * (x * at - 0.5 * xp.log1p(x * x)) + big_b * 0.5 * ((x * x + 1.0) * at - x)
 
-                piece = (2.0 * self.friction.mu0 / np.pi) * (v0 / slope_safe) * (antiderivative(b) - antiderivative(a))
-            else:  # coulomb: sgn(gamma + slope s) = sgn(slope) sgn(s - s0)
-                s0 = xp.clip(-gamma / slope_safe, a, b)
+            piece = (2.0 * self.friction.mu0 / np.pi) * (v0 / slope_safe) * (antiderivative(upper) - antiderivative(lower))
+        else:  # coulomb: sgn(gamma + slope s) = sgn(slope) sgn(s - s0)
+            s0 = xp.clip(-gamma / slope_safe, lower, upper)
 
-                def arm_integral(s):
-                    return alpha * s + 0.5 * beta * s * s
+            def arm_integral(s):
+                return alpha * s + 0.5 * beta * s * s
 
-                piece = self.friction.mu0 * xp.sign(slope) * (arm_integral(b) - 2.0 * arm_integral(s0) + arm_integral(a))
-            total = total + share * self.normal_load_N * xp.where(moving, piece, 0.0)
-        return total
+            piece = self.friction.mu0 * xp.sign(slope) * (arm_integral(upper) - 2.0 * arm_integral(s0) + arm_integral(lower))
+        return xp.sum(share * self.normal_load_N * xp.where(moving, piece, 0.0), axis=-1)
