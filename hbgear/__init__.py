@@ -54,7 +54,13 @@ def _single_threaded_runtime() -> None:
     """
     import os
 
-    if os.environ.get("HBGEAR_RUNTIME_THREADS", "1") != "1" or not hasattr(os, "sched_setaffinity"):
+    setting = os.environ.get("HBGEAR_RUNTIME_THREADS", "1").strip().lower()
+    if setting not in ("1", "default"):
+        import warnings
+
+        warnings.warn(f"HBGEAR_RUNTIME_THREADS = {setting!r}: expected '1' or 'default'; using '1'",
+                      RuntimeWarning, stacklevel=2)
+    if setting == "default" or not hasattr(os, "sched_setaffinity"):
         return
     try:
         from jax._src import xla_bridge

@@ -24,3 +24,9 @@ def test_import_restores_cpu_affinity(setting):
     out = subprocess.run([sys.executable, "-c", CHECK], env=env, capture_output=True, text=True, check=True)
     cpus, pinned = map(int, out.stdout.split())
     assert cpus == len(os.sched_getaffinity(0)) and pinned == 0
+
+
+def test_unknown_runtime_threads_setting_warns_and_uses_one_thread():
+    env = dict(os.environ, HBGEAR_RUNTIME_THREADS="4")
+    out = subprocess.run([sys.executable, "-c", "import hbgear"], env=env, capture_output=True, text=True, check=True)
+    assert "HBGEAR_RUNTIME_THREADS = '4': expected '1' or 'default'" in out.stderr
