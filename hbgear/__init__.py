@@ -86,11 +86,10 @@ def _single_threaded_runtime() -> None:
     except Exception:  # pragma: no cover - no usable backend: JAX reports it at first use
         pass
     finally:
-        os.sched_setaffinity(0, original)
-        for tid in threads() - before:
+        for tid in [0, *(int(t) for t in threads() - before)]:
             try:
-                os.sched_setaffinity(int(tid), original)
-            except OSError:  # pragma: no cover - the thread has ended
+                os.sched_setaffinity(tid, original)
+            except OSError:  # pragma: no cover - the thread has ended, or the mask is refused
                 pass
 
 
