@@ -423,11 +423,17 @@ class GearPairModel:
     def static_windup(self, omega_pinion, xp=np):
         """The soft spring's wind-up ``u_s`` [m] of :meth:`static_state` alone: zero unless
         "spring", in closed form for the sgn and atan laws (no quadrature rule, no static DTE),
-        else by :meth:`static_state`'s quadrature."""
+        else by :meth:`static_state`'s quadrature. `omega_pinion` may be an array of speeds (a
+        curve's read-outs): the closed form takes them at once, the quadrature one by one."""
         if self.boundary != "spring":
             return 0.0 * omega_pinion
         closed = self._closed_form_windup(omega_pinion, xp)
-        return closed if closed is not None else self.static_state(omega_pinion, xp)[1]
+        if closed is not None:
+            return closed
+        if xp.ndim(omega_pinion) == 0:
+            return self.static_state(omega_pinion, xp)[1]
+        speeds = xp.reshape(xp.asarray(omega_pinion), (-1,))
+        return xp.reshape(xp.stack([self.static_state(w, xp)[1] for w in speeds]), xp.shape(omega_pinion))
 
     def _closed_form_windup(self, omega_pinion, xp=np):
         """``k_u u_s = T_p / R_bp + < T_fp/R_bp + T_fg/R_bg >`` with the closed-form mean (``None``

@@ -166,7 +166,7 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
     zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary."""
     omegas = np.asarray(omegas, dtype=float)
     coefficients, reaction = _decode(model, zs, hb)
-    u_static = np.array([float(model.static_windup(w)) for w in omegas])
+    u_static = np.broadcast_to(np.asarray(model.static_windup(omegas), dtype=float), omegas.shape)
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
                         hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
              for k in range(0, len(omegas), READ_OUT_BATCH)]

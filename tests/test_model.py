@@ -208,3 +208,27 @@ def test_static_windup_closed_form_equals_the_quadrature(overrides):
     expected = (model.torque_pinion_Nm / model.base_radius_pinion_m + float(closed(3000 * 2 * math.pi / 60)))
     assert float(u_static) == pytest.approx(expected / model.spring_stiffness_N_per_m, rel=1e-15)
     assert model.static_windup(3000 * 2 * math.pi / 60) == u_static  # u_s alone: the same value
+    # several speeds at once (a curve's read-outs): each its own wind-up, as by the quadrature
+    speeds = np.array([50.0, 3000.0, 13400.0, 21000.0]) * 2 * math.pi / 60
+    want = [(model.torque_pinion_Nm / model.base_radius_pinion_m + float(by_quadrature(w)))
+            / model.spring_stiffness_N_per_m for w in speeds]
+    np.testing.assert_allclose(model.static_windup(speeds), want, rtol=0,
+                               atol=1e-12 * friction_scale / model.spring_stiffness_N_per_m)
+
+
+def test_static_windup_of_several_speeds_by_quadrature():
+    """A law without a closed form (Kelley-Lemanski): an array of speeds gives each speed's own
+    quadrature wind-up, in the array's shape."""
+    from pathlib import Path
+
+    from hbgear.config import load_config
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
+    model = build_model(load_config(example, ["friction.law=kelley-lemanski"]))
+    assert model._mean_static_friction_force(1000.0) is None
+    speeds = np.array([[1000.0, 3000.0], [7000.0, 13400.0]]) * 2 * math.pi / 60
+    got = np.asarray(model.static_windup(speeds))
+    assert got.shape == speeds.shape
+    want = [float(model.static_state(w)[1]) for w in speeds.ravel()]
+    np.testing.assert_array_equal(got.ravel(), want)
+    assert len(set(want)) == 4  # the speed matters: no point took another's value
