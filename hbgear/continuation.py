@@ -485,7 +485,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                 s["y_pred"], s["row"], s["target"], s["previous"], max_iter, tolerance,
                 f[:4] + (f[4] & use_chord,), scale, args)
             converged = status == 0
-            factor = jax.tree.map(lambda a, b: jnp.where(converged, a, b), new_factor, s["factor"])
+            factor = jax.lax.cond(converged, lambda: new_factor, lambda: s["factor"])
             angle = jnp.degrees(jnp.arccos(jnp.clip(t @ s["t"], -1.0, 1.0)))
             offset = jnp.linalg.norm(y - s["y_pred"])
             ds = s["ds"]
@@ -506,7 +506,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                          previous=t, done=k + 1 >= budget, pending=s["pending"],
                          y_out=s["y_out"].at[k].set(y), t_out=s["t_out"].at[k].set(t), info=s["info"].at[k].set(info))
             refused = dict(s, done=jnp.asarray(True), pending=pending, factor=factor)
-            return jax.tree.map(lambda a, b: jnp.where(regular, a, b), taken, refused)
+            return jax.lax.cond(regular, lambda: taken, lambda: refused)
 
         s = jax.lax.while_loop(lambda s: ~s["done"], turn, state)
         return s["k"], (s["y_out"], s["t_out"], s["info"]), (s["y"], s["t"], s["ds"]), s["factor"], s["pending"]
@@ -525,7 +525,7 @@ class _Compiled:
         self._jax = jax
         self.advance, no_factor = compiled
         self.chord, self.scale = bool(chord), float(scale)
-        self.controls = np.zeros(9) if controls is None else np.asarray(controls, dtype=float)
+        self.controls = tuple(np.float64(c) for c in (np.zeros(9) if controls is None else controls))
         self.last = None
         self.empty = None
         self.no_factor = no_factor
