@@ -316,6 +316,18 @@ def _python_corrector(residual_and_jacobians, residual, scale, size):
 SEGMENT_POINTS = 32
 
 
+def _running(condition, count):
+    """``condition & (count >= 0)`` for a ``lax.while_loop`` whose `count` never goes negative.
+
+    The second, always true, term makes the loop condition read two loop variables. XLA's
+    while-loop passes look for an induction variable whenever the condition reads only one;
+    they then extract and clone everything that computes it in the loop body, here the whole
+    corrector, several times per compilation (a third of the HLO-pass time of the gear pair's
+    program). With two variables the search stops at the condition.
+    """
+    return condition & (count >= 0)
+
+
 def _jit_corrector(residual_and_jacobians, residual, size):
     """The corrector of :func:`_python_corrector`, and the regular continuation steps around it,
     as one compiled JAX function (``advance``), and ``no_factor`` (an unusable chord LU).
@@ -449,7 +461,8 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         init = dict(it=jnp.asarray(0, i32), y=y_pred, r=r0, jac=jnp.zeros((size, size + 1)), norm=norm0,
                     cand=y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, 3, 0).astype(i32),
                     status=jnp.asarray(-1, i32), chord_it=jnp.asarray(0, i32))
-        s = jax.lax.while_loop(lambda s: s["status"] < 0,
+        # (`it >= 0` always holds: see _running)
+        s = jax.lax.while_loop(lambda s: _running(s["status"] < 0, s["it"]),
                                lambda s: jax.lax.cond(s["mode"] == 3, chord, newton, s), init)
         t, new_factor = jax.lax.cond(s["status"] == 0, lambda: tangent(s["jac"], previous),
                                      lambda: (jnp.full(size + 1, jnp.nan), no_factor(previous)))
@@ -508,7 +521,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
             refused = dict(s, done=jnp.asarray(True), pending=pending, factor=factor)
             return jax.lax.cond(regular, lambda: taken, lambda: refused)
 
-        s = jax.lax.while_loop(lambda s: ~s["done"], turn, state)
+        s = jax.lax.while_loop(lambda s: _running(~s["done"], s["k"]), turn, state)
         return s["k"], (s["y_out"], s["t_out"], s["info"]), (s["y"], s["t"], s["ds"]), s["factor"], s["pending"]
 
     return advance, no_factor
