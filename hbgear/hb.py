@@ -78,8 +78,10 @@ class HarmonicBalance:
         the contact path, not on the parameter) and reused: evaluating ``exp(-2 pi i r s)`` at
         thousands of nodes would otherwise dominate every residual.
 
-        **Returns:** ``(s, kernel_cos, kernel_sin)``, shapes ``(n,)``, ``(R+1, n)``, ``(R+1, n)``
-        with the weights folded in, ``R = ceil(2H/nu)``.
+        **Returns:** ``(s, kernel_cos, kernel_sin, frozen, jump_layout)``: shapes ``(n,)``,
+        ``(R+1, n)``, ``(R+1, n)`` with the weights folded in, ``R = ceil(2H/nu)``; the
+        parameter-independent operator pieces of :meth:`_frozen_blocks` and the jump layout of
+        :meth:`_frozen_jump_layout`, each ``None`` when the system does not allow them.
         """
         hit = _PREPARED.get((self, id(system)))
         if hit is not None and hit[0] is system:  # the same system object as last time
@@ -101,7 +103,7 @@ class HarmonicBalance:
         if _has_tracer((system, p)):  # a traced system (under an outer jit/vmap): build in-trace
             s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
             phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
-            return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None
+            return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None, None
         breakpoints = _breakpoint_key(system, p)
         key = (breakpoints, max_mesh_order)
         if key not in _QUADRATURE_CACHE:
@@ -111,7 +113,16 @@ class HarmonicBalance:
             phase = 2 * np.pi * np.outer(np.arange(max_mesh_order + 1), s)
             _QUADRATURE_CACHE[key] = tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
         quad = _QUADRATURE_CACHE[key]
-        return quad + (self._frozen_blocks(system, p, quad),)
+        return quad + (self._frozen_blocks(system, p, quad), self._frozen_jump_layout(system))
+
+    def _frozen_jump_layout(self, system):
+        """The jump layout of :meth:`_sample_points` (device arrays) when the breakpoints do not
+        depend on the parameter, else ``None``. Given with the quadrature, a compiled caller that
+        takes the system as an argument does not rebuild it (a projection of ``2C`` sawtooth
+        signals) at every residual evaluation."""
+        if not getattr(system, "coefficients_independent_of_parameter", False):
+            return None
+        return tuple(jnp.asarray(a) for a in self._jump_layout(system, 1.0))
 
     def _frozen_blocks(self, system, p, quad):
         """The speed-independent pieces of the linear operator, when the system declares them so.
@@ -206,7 +217,7 @@ class HarmonicBalance:
         (a loop over them in numpy).
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
-        s, kernel_cos, kernel_sin, frozen = quad
+        s, kernel_cos, kernel_sin, frozen = quad[:4]
         eye = xp.eye(n)
         if frozen is not None:  # only the forcing is needed (frozen blocks, or False): probe at 0 alone
             eye = xp.zeros((0, n))
@@ -277,19 +288,19 @@ class HarmonicBalance:
         extra = z[slot] * system.force_scale
         return x.at[slot].set(0.0), extra
 
-    def _nonlinear(self, x, velocity, extra, p, system):
+    def _nonlinear(self, x, velocity, extra, p, system, layout=None):
         """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_sample_points`)."""
         if system.is_linear:
             return jnp.zeros(self.size)
-        s, q, qd, (_, _, weight, delta) = self._sample_points(x, velocity, system, p)
+        s, q, qd, (_, _, weight, delta) = self._sample_points(x, velocity, system, p, layout)
         values = system.force(s, q, qd, p, "nonlinear", extra, jnp)
         N = self.samples
         return (fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta).reshape(self.size)
 
-    def _sample_points(self, x, velocity, system, p):
+    def _sample_points(self, x, velocity, system, p, layout=None):
         r"""Where ``Q_nl`` is evaluated: the ``N`` uniform samples of the base period, then each
         candidate jump phase just after and just before it; returns ``(s, q, q', layout)``, the
-        layout of :meth:`_jump_layout`.
+        layout of :meth:`_jump_layout` (`layout`, when given: the quadrature's frozen one).
 
         ``Q_nl`` jumps where the load shares do (a pair enters or leaves contact, at known mesh
         phases): sampled uniformly, a jump aliases at ``O(1/N)``. With ``J_c`` the jump at base
@@ -305,7 +316,7 @@ class HarmonicBalance:
         A jump whose phase the state decides (a Coulomb law's ``V_s = 0``) stays ``O(1/N)``.
         """
         n, H, N, nu = self.ndof, self.harmonics, self.samples, self.nu
-        layout = sides, at_c, _, _ = self._jump_layout(system, p)
+        layout = sides, at_c, _, _ = self._jump_layout(system, p) if layout is None else layout
         xc, vc = x.reshape(n, self.block), velocity.reshape(n, self.block)
         q_c, v_c = xc @ at_c.T, vc @ at_c.T  # (ndof, C): the state at the jump phases
         s = jnp.concatenate([jnp.mod(jnp.arange(N) * nu / N, 1.0), sides])
@@ -362,7 +373,7 @@ class HarmonicBalance:
             linear = self._linear_response(x, p, system, quad)
         else:
             linear = operator[0] @ x - operator[1]
-        r = linear - self._nonlinear(x, self._velocity(x, system, p), extra, p, system)
+        r = linear - self._nonlinear(x, self._velocity(x, system, p), extra, p, system, _layout(quad))
         k = system.free_mean_dof
         if k is not None:
             r = r.at[k * self.block].add(extra)
@@ -395,7 +406,7 @@ class HarmonicBalance:
     def _residual_jit(self, z, p, system, quad):
         return self._residual(z, p, system, quad)
 
-    def _nonlinear_jacobian(self, x, extra, p, system):
+    def _nonlinear_jacobian(self, x, extra, p, system, layout=None):
         """``(T_q, T_v, I (x) D)``: ``d(P Q_nl)/dx = T_q + T_v (I (x) D)`` in SI, from the sampled
         pointwise derivatives of ``Q_nl`` with respect to ``q`` and ``q'``.
 
@@ -409,7 +420,8 @@ class HarmonicBalance:
         """
         n, H, N = self.ndof, self.harmonics, self.samples
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
-        s, q, qd, (_, at_c, weight, delta) = self._sample_points(x, (x.reshape(n, self.block) @ d.T).ravel(), system, p)
+        velocity = (x.reshape(n, self.block) @ d.T).ravel()
+        s, q, qd, (_, at_c, weight, delta) = self._sample_points(x, velocity, system, p, layout)
 
         def f(qq, vv):
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
@@ -451,7 +463,7 @@ class HarmonicBalance:
         jac = operator[0]
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, _layout(quad))
             jac = jac - t_q - self._times_derivative(t_v, system, p)
         jac = jac * (system.displacement_scale / system.force_scale)
         k = system.free_mean_dof
@@ -484,13 +496,13 @@ class HarmonicBalance:
             if system.is_linear:
                 jz, jv = lin / fs, c_conv / fs
             else:
-                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system)
+                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, _layout(quad))
                 jz, jv = (lin - t_q - self._times_derivative(t_v, system, p)) / fs, (c_conv - t_v) / fs
         else:
 
             def response(xx, shift):
                 v = self._velocity(xx, system, p) + shift
-                return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system)) / fs
+                return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system, _layout(quad))) / fs
 
             jz, jv = jax.jacfwd(response, argnums=(0, 1))(x, jnp.zeros_like(x))
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
@@ -504,6 +516,11 @@ def _breakpoint_key(system, p) -> tuple:
     """The system's breakpoints at `p` as a hashable key (rounded to 1e-15: equal geometries
     share their cached rules and layouts)."""
     return tuple(np.round(np.ravel(np.asarray(system.breakpoints(p, np), dtype=float)), 15))
+
+
+def _layout(quad):
+    """The quadrature's frozen jump layout, or ``None`` (a quadrature built without one)."""
+    return quad[4] if len(quad) > 4 else None
 
 
 def _jumps(values, weight):
