@@ -9,7 +9,9 @@ Model: ``examples/paper_table1.toml`` with ``friction.model = NLTV``, ``friction
   inside the compiled corrector) with :func:`hbgear.commands.frc.frc_method` (the compiled
   chord corrector) over 3000 -> 20000 rpm, tolerance 1e-9. The first run compiles the
   corrector; the curve is then repeated ``repeats`` times (median). First-curve overhead =
-  first run - median run (``Branch.start_seconds`` of the first run: compilation + start).
+  first run - median run (``Branch.start_seconds`` of the first run: compilation + start);
+  the same is measured in ``COLD_PROCESSES`` fresh Python processes, each with a new empty
+  disk cache (``--first-curve ... --cold``), and the headline is the median of all of them.
   Then, in a fresh Python process sharing the disk cache, the first curve of **another gear
   pair** (torque x 1.3, mesh damping x 1.5): its parameters are arguments of the compiled
   program, so it loads from the cache instead of compiling (``--first-curve``).
@@ -93,21 +95,39 @@ def hb_curve(model, rpm0, rpm1, repeats):
     }
 
 
-def new_pair_first_curve(rpm0, rpm1):
-    """The first curve of another gear pair in a fresh process (same disk cache): its overhead."""
-    import json
-    import subprocess
+#: Fresh processes with an empty disk cache that measure the first-curve overhead again (the
+#: compile time on a shared 2-core machine varies by a second from run to run).
+COLD_PROCESSES = 2
 
-    out = subprocess.run([sys.executable, __file__, "--first-curve", str(rpm0), str(rpm1)], capture_output=True,
-                         text=True, check=True)
+
+def new_pair_first_curve(rpm0, rpm1, cold=False):
+    """The first curve in a fresh process: of another gear pair sharing the disk cache, or
+    (`cold`) of the same pair with a new empty disk cache. Its overhead, as :func:`hb_curve`."""
+    import json
+    import os
+    import shutil
+    import subprocess
+    import tempfile
+
+    env = dict(os.environ)
+    cache = tempfile.mkdtemp(prefix="hbgear-bench-cold-") if cold else None
+    if cold:
+        env["HBGEAR_CACHE_DIR"] = cache
+    try:
+        out = subprocess.run([sys.executable, __file__, "--first-curve", str(rpm0), str(rpm1)]
+                             + (["--cold"] if cold else []), capture_output=True, text=True, check=True, env=env)
+    finally:
+        if cache:
+            shutil.rmtree(cache, ignore_errors=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def _first_curve_main(rpm0, rpm1):
+def _first_curve_main(rpm0, rpm1, cold=False):
     import json
 
     model = build()
-    model = model.replace(torque_pinion_Nm=1.3 * model.torque_pinion_Nm, damping_ratio=1.5 * model.damping_ratio)
+    if not cold:
+        model = model.replace(torque_pinion_Nm=1.3 * model.torque_pinion_Nm, damping_ratio=1.5 * model.damping_ratio)
     r = hb_curve(model, rpm0, rpm1, 1)
     print(json.dumps({"first_s": r["first_s"], "start_s": r["start_s"], "first_curve_s": r["first_curve_s"],
                       "points": len(r["branch"])}))
@@ -156,6 +176,8 @@ def run(quick=False, repeats=None):
     model = build()
     hb = hb_curve(model, rpm0, rpm1 if not quick else 8000.0, repeats)
     other = new_pair_first_curve(rpm0, rpm1 if not quick else 8000.0)
+    cold = [new_pair_first_curve(rpm0, rpm1 if not quick else 8000.0, cold=True) for _ in range(COLD_PROCESSES)]
+    first_all = [hb["first_s"]] + [c["first_s"] for c in cold]
     branch = hb["branch"]
     indices = sample_indices(branch, 2 if quick else 6)
     n = len(branch)
@@ -171,7 +193,8 @@ def run(quick=False, repeats=None):
         "range_rpm": (rpm0, rpm1 if not quick else 8000.0), "points": n, "status": branch.status.name,
         "rejected": branch.rejected, "folds_rpm": [float(x) * 60 / (2 * np.pi) for x in branch.fold_p],
         "newton_iterations": int(np.sum(branch.iterations)), "max_residual": float(np.max(branch.residual)),
-        "start_s": hb["start_s"], "start_warm_s": hb["start_warm_s"], "first_s": hb["first_s"],
+        "start_s": hb["start_s"], "start_warm_s": hb["start_warm_s"], "first_s": statistics.median(first_all),
+        "first_all_s": first_all,
         "first_curve_s": hb["first_curve_s"], "curve_s": hb["curve_s"], "curve_all_s": hb["curve_all_s"],
         "new_pair": other,
         "hb_per_point_s": per_point_hb, "ti": tis,
@@ -186,8 +209,11 @@ def table(r):
         f"NLTV arctan, soft spring, H={H}, N={SAMPLES}: {r['range_rpm'][0]:g} -> {r['range_rpm'][1]:g} rpm, "
         f"{r['points']} points ({r['status']}, {r['rejected']} rejected steps, {r['newton_iterations']} corrector "
         f"iterations, folds at {', '.join(f'{x:.0f}' for x in r['folds_rpm']) or 'none'} rpm, max|R| {r['max_residual']:.1e})",
-        f"  first curve: {r['first_curve_s']:.2f} s in all; overhead (first run - median run) {r['first_s']:.2f} s "
+        f"  first curve: {r['first_curve_s']:.2f} s in all; overhead (first run - median run) {r['first_all_s'][0]:.2f} s "
         f"(compilation + start point {r['start_s']:.2f} s; the start point alone, compiled: {r['start_warm_s']:.3f} s)",
+        f"  first-curve overhead again in {len(r['first_all_s']) - 1} fresh processes, each with an empty disk cache: "
+        + ", ".join(f"{x:.2f} s" for x in r["first_all_s"][1:])
+        + f"; median of all {len(r['first_all_s'])}: {r['first_s']:.2f} s",
         f"  first curve of another gear pair (torque x 1.3, damping x 1.5) in a fresh process, same disk cache: "
         f"overhead {r['new_pair']['first_s']:.2f} s (start point + loading the compiled program "
         f"{r['new_pair']['start_s']:.2f} s), {r['new_pair']['points']} points",
@@ -213,9 +239,11 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--first-curve", nargs=2, type=float, metavar=("RPM0", "RPM1"),
                         help="only the first curve of another gear pair (JSON on the last line)")
+    parser.add_argument("--cold", action="store_true",
+                        help="with --first-curve: the same gear pair (the caller gives an empty disk cache)")
     args = parser.parse_args(argv)
     if args.first_curve:
-        _first_curve_main(*args.first_curve)
+        _first_curve_main(*args.first_curve, cold=args.cold)
         return 0
     print(table(run(args.quick, args.repeats)))
     return 0
