@@ -406,9 +406,17 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
 # ============================================================================ refined, batched
 
 
-def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
+def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, update="rayleigh"):
     """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
-    stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``."""
+    stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``.
+
+    `update` of ``mu`` after the step ``x = P(mu)^-1 P'(mu) v`` (``|v| = 1``): ``"rayleigh"``,
+    the root of ``x^H P(mu') x = 0`` nearest ``mu`` (:func:`_refine`), or ``"newton"``,
+    ``mu' = mu - 1 / (v^H x)`` (nonlinear inverse iteration, Ruhe 1973: quadratic convergence
+    to a simple exponent). Where two real exponents are about to merge into a complex pair
+    (the nearly parallel eigenvectors of a super-harmonic resonance) the roots of the Rayleigh
+    functional lie between them, off the real axis, and its iteration stalls there; the Newton
+    update from a real seed stays real and converges to the exponent nearest the seed."""
     mu, v = mu.copy(), v.copy()
     converged = np.zeros(len(mu), dtype=bool)
     active = np.arange(len(mu))
@@ -425,15 +433,20 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
         except np.linalg.LinAlgError:  # an exactly singular pencil: leave these to the single-point way
             break
         norm = np.linalg.norm(y[..., 0], axis=1)
+        if update == "newton":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                new = m - 1.0 / np.sum(x.conj()[..., 0] * y[..., 0], axis=1)
         bad = ~np.isfinite(norm) | (norm == 0.0)
         y = y / np.where(bad, 1.0, norm)[:, None, None]
-        yh = y.conj()[..., 0]
-        qa = np.sum(yh * (c2 @ y)[..., 0], axis=1)
-        qb = np.sum(yh * (c1 @ y)[..., 0], axis=1)
-        qc = np.sum(yh * (c0 @ y)[..., 0], axis=1)
-        disc = np.sqrt(qb * qb - 4.0 * qa * qc + 0j)
-        r1, r2 = (-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa)
-        new = np.where(np.abs(r1 - m) <= np.abs(r2 - m), r1, r2)
+        if update != "newton":
+            yh = y.conj()[..., 0]
+            qa = np.sum(yh * (c2 @ y)[..., 0], axis=1)
+            qb = np.sum(yh * (c1 @ y)[..., 0], axis=1)
+            qc = np.sum(yh * (c0 @ y)[..., 0], axis=1)
+            disc = np.sqrt(qb * qb - 4.0 * qa * qc + 0j)
+            r1, r2 = (-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa)
+            new = np.where(np.abs(r1 - m) <= np.abs(r2 - m), r1, r2)
+        bad |= ~np.isfinite(new)
         done = np.abs(new - m) <= tol * np.maximum(1.0, np.abs(new))
         mu[active], v[active] = new, y[..., 0]
         converged[active[done & ~bad]] = True
@@ -441,7 +454,7 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8):
     return mu, v, converged
 
 
-def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_walk=4):
+def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_walk=4, update="rayleigh"):
     """:func:`_most_central_member`'s walk for refined seeds, batched: every seed with
     ``|centre| > 1/4`` has its neighbour copy towards the centre refined (one stacked solve per
     step); a seed moves there while the centrality falls. A seed is left unconverged when a
@@ -460,7 +473,7 @@ def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_w
             s_other = open_[other]
             start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(s_other, k[other])])
             target = mu[s_other] + 1j * k[other]
-            r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, owner[s_other], target, start)
+            r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, owner[s_other], target, start, update=update)
             nb_mu[other], nb_v[other] = r_mu, r_v
             nb_ok[other] = r_ok & (np.abs(r_mu - target) <= 0.25)
             nb_c[other] = harmonic_centre(r_v.T, ndof, harmonics)
@@ -494,10 +507,11 @@ def _seed_picks(mu, mult, key, need: int, near_zero) -> list[int]:
             if not (mu[i].imag < -tol and any(abs(mu[i].conjugate() - mu[j]) <= tol for j in picks))]
 
 
-def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
+                          update: str = "rayleigh"):
     """:func:`refined_central` for a stack of points: a list with ``None`` where a point is not
     settled this way (a refinement or a walk step did not converge onto the expected copy, or
-    not ``2n`` distinct families were found).
+    not ``2n`` distinct families were found). `update`: see :func:`_batched_refine`.
 
     The seed sub-problems (:func:`_batch_seed_harmonics`) are one stacked eigen-decomposition,
     every refinement step and every walk step one stacked solve over all points: this removes
@@ -524,8 +538,9 @@ def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=Non
         if len(owner):
             v0[:, win] = vec_s[owner, :, np.asarray(picks_of, dtype=int)]
             v0 /= np.linalg.norm(v0, axis=1, keepdims=True)
-        mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0)
-        mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics)
+        mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0,
+                                           update=update)
+        mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, update=update)
     out: list = [None] * m
     settled = np.ones(m, dtype=bool)
     np.logical_and.at(settled, owner, converged)
@@ -564,8 +579,9 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
     """Central exponents ``mu = lam / w`` of a stack of points, shapes ``(m, N, N)``.
 
     `method`: ``"dense"`` (:func:`dense_central`) or ``"refined"`` (= ``"auto"``):
-    :func:`refined_central_batch` for all points, then (``N > REFINE_MIN_SIZE``)
-    :func:`refined_central` with its larger seed window where that was not settled, then
+    :func:`refined_central_batch` for all points, again with the Newton update where that was
+    not settled (the nearly merged real pairs of super-harmonic resonances), then
+    (``N > REFINE_MIN_SIZE``) :func:`refined_central` with its larger seed window, then
     :func:`dense_central` (stacked) for the rest; the same exponents as the dense way.
     Returns a list of ``m`` arrays.
     """
@@ -574,11 +590,15 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
     if method == "dense":
         return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
     group = max(1, int(BATCH_BYTES // (16 * a0.shape[-1] ** 2)))  # keep the stacked pencils in cache
-    out = []
-    for lo in range(0, len(a0), group):
-        part = slice(lo, lo + group)
-        out += refined_central_batch(a0[part], a1[part], a2[part], ndof, harmonics, zero_tol=zero_tol,
-                                     copy_tol=copy_tol)
+    out: list = [None] * len(a0)
+    for update in ("rayleigh", "newton"):
+        todo = [k for k in range(len(out)) if out[k] is None]
+        for lo in range(0, len(todo), group):
+            part = todo[lo : lo + group]
+            found = refined_central_batch(a0[part], a1[part], a2[part], ndof, harmonics, zero_tol=zero_tol,
+                                          copy_tol=copy_tol, update=update)
+            for k, mu in zip(part, found):
+                out[k] = mu
     if a0.shape[-1] > REFINE_MIN_SIZE:  # worth a second, better-seeded try before the dense way
         for k in range(len(out)):
             if out[k] is None:

@@ -73,6 +73,25 @@ def test_seed_between_a_split_pair_restarts_on_either_side():
     assert max_pair_distance(np.exp(2 * np.pi * refined), np.exp(2 * np.pi * dense)) < 1e-8
 
 
+def test_nearly_merged_real_pair_is_settled_by_the_newton_update():
+    """3326 rpm, a quarter of the primary resonance (soft spring, NLTV arctan, H = 32): the
+    soft-mode pair is two real exponents about to merge (-0.052, -0.035 at N = 1024) with
+    nearly parallel eigenvectors. The Rayleigh functional's roots lie between them, off the real
+    axis, and the batched refinement stalls there; the Newton update settles the point in the
+    batched way, with the dense way's multipliers, so neither fallback is needed."""
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    a0, a1, a2, _ = quadratic_at(model, 3326.0)
+    dense = hill.dense_central(a0, a1, a2, model.ndof, 32)[0]
+    real = dense[np.abs(dense.imag) < 1e-12]
+    assert len(real) == 2 and abs(real[0] - real[1]) > 1e-3  # two distinct real exponents
+    assert hill.refined_central_batch(a0, a1, a2, model.ndof, 32)[0] is None
+    newton = hill.refined_central_batch(a0, a1, a2, model.ndof, 32, update="newton")[0]
+    assert newton is not None
+    assert max_pair_distance(np.exp(2 * np.pi * newton), np.exp(2 * np.pi * dense)) < 1e-8
+    auto = hill.central_exponents(a0, a1, a2, model.ndof, 32)[0]
+    assert max_pair_distance(np.exp(2 * np.pi * auto), np.exp(2 * np.pi * dense)) < 1e-8
+
+
 @pytest.mark.parametrize("overrides, rpm", CASES)
 def test_refined_central_exponents_equal_dense_selection(overrides, rpm):
     model = gear(*overrides)
