@@ -384,6 +384,30 @@ def _variational_rhs():
     return _VARIATIONAL_RHS
 
 
+def _state_synthesis(solution):
+    """``tau -> (q, q')`` of a periodic solution at the base-period fraction ``tau`` (numpy),
+    from one matrix of its coefficients: ``[q; q'] = S [1, cos(2 pi k tau), sin(2 pi k tau)]``.
+
+    In numpy, not in the compiled right-hand side: a reduction over the harmonics there makes
+    XLA hand the program to its worker thread, which costs more than the whole evaluation."""
+    c = np.asarray(solution.coefficients, dtype=float)  # (ndof, 2H+1): a0, a1, b1, ...
+    harmonics, n = solution.harmonics, c.shape[0]
+    k = np.arange(1, harmonics + 1)
+    a, b = c[:, 1::2], c[:, 2::2]
+    synthesis = np.concatenate([
+        np.concatenate([c[:, :1], a, b], axis=1),
+        np.concatenate([np.zeros((n, 1)), solution.base_frequency * b * k, -solution.base_frequency * a * k], axis=1),
+    ])
+    orders = 2.0 * np.pi * k
+
+    def state(tau):
+        angle = orders * tau
+        x = synthesis @ np.concatenate([[1.0], np.cos(angle), np.sin(angle)])
+        return x[:n], x[n:]
+
+    return state
+
+
 def monodromy_variational(
     model,
     solution_or_state_fn: Any,
@@ -410,28 +434,37 @@ def monodromy_variational(
 
     **Returns:** ``Phi``, shape ``(2n, 2n)``, ``x(nu Tm) = Phi x(0)``.
     """
+    import jax
     from scipy.integrate import solve_ivp
 
-    state = getattr(solution_or_state_fn, "state_at", None)
-    if state is not None:
-        nu = int(solution_or_state_fn.nu)
-        u_static = float(solution_or_state_fn.u_static_m)
-        reaction = float(solution_or_state_fn.reaction_force_N)
+    n = model.ndof
+    if hasattr(solution_or_state_fn, "state_at"):
+        solution = solution_or_state_fn
+        nu = int(solution.nu)
+        u_static = float(solution.u_static_m)
+        reaction = float(solution.reaction_force_N)
+        state = _state_synthesis(solution)
     else:
-        state = solution_or_state_fn
+        state_fn = solution_or_state_fn
         u_static = float(model.static_windup(omega))
         reaction = 0.0
-    n = model.ndof
+
+        def state(tau):
+            q, qd = state_fn(np.array([tau]))
+            return np.asarray(q, float).reshape(n), np.asarray(qd, float).reshape(n)
+
     variational_rhs = _variational_rhs()
     minv = np.linalg.inv(np.asarray(model.mass_matrix(np), dtype=float))
     base_period = nu * 2.0 * np.pi / (float(model.teeth_pinion) * float(omega))
     bp = np.unique(np.concatenate([[0.0], np.asarray(model.phase_breakpoints(), float), [1.0]]))
     edges = np.unique(np.concatenate([(j + bp) / nu for j in range(nu)]))
+    # the arguments that stay the same over the ~1000 calls go to the device once (a Python float
+    # or numpy argument is converted at every call: most of the cost of a call before)
+    device_model, *constants = jax.device_put((model, float(omega), u_static, reaction, minv, base_period))
 
     def derivative(tau, s, phi):
-        q, qd = state(np.array([tau]))
-        return np.asarray(variational_rhs(model, s, np.asarray(q, float).reshape(n), np.asarray(qd, float).reshape(n),
-                                          float(omega), u_static, reaction, minv, base_period, phi))
+        q, qd = state(tau)
+        return np.asarray(variational_rhs(device_model, s, q, qd, *constants, phi))
 
     def s_lo_of(start):
         return (start * nu) % 1.0
