@@ -77,9 +77,11 @@ STEP_TOL = 1e-7
 #: sub-problem still sees as one complex pair: ``|a1 - a2|`` ~ 0.07 at 3800 rpm on the NLTV pair).
 SPLIT_OFFSET = 0.05
 
-#: Points per stacked refinement: about this many bytes per stack of complex pencils (7 points at
-#: N = 130, all of a Duffing curve at N = 15); larger stacks only add memory traffic.
-BATCH_BYTES = 2e6
+#: Points per stacked refinement: about this many bytes per stack of complex pencils (3 points at
+#: N = 130, all of a Duffing curve at N = 15). On the NLTV pair's 2406-point curve (N = 130) the
+#: Hill exponents took 12.1 s with 3 points per stack, 15.3 s with 7 and 15.1 s with 1 (medians
+#: of three alternated runs): larger stacks only add memory traffic, smaller ones call overhead.
+BATCH_BYTES = 1e6
 
 _BLAS_CONTROLLER: list = []
 
