@@ -590,7 +590,7 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
     if method not in ("auto", "dense", "refined"):
         raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
     if method == "dense":
-        return dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+        return [_snapped(mu) for mu in dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)]
     group = max(1, int(BATCH_BYTES // (16 * a0.shape[-1] ** 2)))  # keep the stacked pencils in cache
     out: list = [None] * len(a0)
     for update in ("rayleigh", "newton"):
@@ -610,4 +610,16 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
         for k, mu in zip(rest, dense_central(a0[rest], a1[rest], a2[rest], ndof, harmonics,
                                              zero_tol=zero_tol, copy_tol=copy_tol)):
             out[k] = mu
-    return out
+    return [_snapped(mu) for mu in out]
+
+
+def _snapped(mu):
+    """The exponents counted as self-conjugate families (:func:`_is_self_conjugate`: a real
+    multiplier) with ``Im mu`` set to its multiple of 1/2, so that their multipliers come out
+    real: refined to ``STEP_TOL``, ``Im mu`` is off by ~1e-7, i.e. ``Im`` of the multiplier by
+    ~1e-6 of its modulus, the threshold at which a multiplier counts as real."""
+    mu = np.array(mu, dtype=complex)
+    half = np.round(2.0 * mu.imag) / 2.0
+    snap = np.abs(2.0 * mu.imag - 2.0 * half) <= SELF_CONJUGATE_TOL
+    mu[snap] = mu[snap].real + 1j * half[snap]
+    return mu

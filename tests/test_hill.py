@@ -231,3 +231,13 @@ def test_nltv_real_negative_multipliers_at_h32_match_the_variational_monodromy()
     for method in ("dense", "refined"):
         mult = st.hill_multipliers(hb, sol.z, w, GearSystem(model), method=method)
         assert max_pair_distance(mult, exact, relative=False) < 1e-2, (method, mult, exact)
+        # self-conjugate families (real multipliers) come out real to rounding, not ~1e-6 off the
+        # axis, where the "real" test of stability.period_doubling would flicker between points
+        assert np.sum((np.abs(mult.imag) < 1e-12) & (mult.real < 0)) == 2, (method, mult)
+
+
+def test_snapped_sets_only_self_conjugate_exponents_on_half_integers():
+    mu = np.array([-0.03 + 0.5000003j, -0.02 - 0.4999996j, 0.01 + 1e-7j, -0.05 + 0.2j, -0.04 + 0.50002j])
+    snapped = hill._snapped(mu)
+    np.testing.assert_array_equal(snapped.imag, [0.5, -0.5, 0.0, 0.2, 0.50002])
+    np.testing.assert_array_equal(snapped.real, mu.real)
