@@ -130,3 +130,44 @@ def test_switch_off_and_cost_rule(tmp_path):
     linear = model.replace(contact="linear")
     assert period_doubling_enabled(cfg, args, linear, 8, 1)[:2] == (True, False)
     assert not math.isnan(h_max)
+
+
+def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch):
+    """NLTV arctan, soft spring (the paper's pair), H = 32, N = 256: the -1 crossing near 5270 rpm
+    needs the variational monodromy. Started from Hill's crossing (0.23 rpm off the exact one at
+    this N) it is the crossing of the exact search over the whole segment (to the speed
+    tolerance) for fewer monodromies; a misleading Hill start still ends on it."""
+    from hbgear import stability
+    from hbgear.commands import frc as frc_command
+    from hbgear.hb import HarmonicBalance
+
+    model = build_model(load_config(Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml",
+                                    ["friction.model='NLTV'", "friction.law='arctan'"]))
+    harmonics, samples = 32, 256
+    hb = HarmonicBalance(model.ndof, harmonics, 1, samples)
+    p = rpm_to_rad_s(np.array([5255.0, 5285.0]))
+    z = np.stack([solve_periodic(model, w, harmonics=harmonics, samples=samples).z for w in p])
+    branch = SimpleNamespace(p=p, z=z)
+    calls = []
+    monodromy = stability.monodromy_variational
+    monkeypatch.setattr(stability, "monodromy_variational", lambda *a, **k: calls.append(1) or monodromy(*a, **k))
+
+    def locate():
+        calls.clear()
+        point, why = frc_command._locate_on_segment(model, hb, branch, 0, harmonics, samples, 1e-9, 30)
+        assert point is not None, why
+        assert point.multiplier == pytest.approx(-1.0, abs=1e-6)
+        return point.omega, len(calls)
+
+    from_hill, hill_calls = locate()
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda *a: None)
+    exact, exact_calls = locate()
+    assert from_hill == pytest.approx(exact, rel=2e-7)
+    assert rpm_to_rad_s(5255.0) < exact < rpm_to_rad_s(5285.0)
+    assert hill_calls < exact_calls
+    # Hill's slope of the wrong sign (mu + 1 falls with the speed here): stepped out to the segment's end without a sign change, then
+    # the whole segment is searched
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda model, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0))
+    fallback, fallback_calls = locate()
+    assert fallback == pytest.approx(exact, rel=2e-7)
+    assert fallback_calls > exact_calls
