@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg
 
 from . import simulate as _simulate_module
-from .continuation import Branch, IllinoisBracket, PseudoArclength, Status, continuation
+from .continuation import Branch, PseudoArclength, Status, continuation, illinois
 from .errors import ConvergenceError
 from .hb import HarmonicBalance
 from .solve import PeriodicSolution, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
@@ -205,27 +205,17 @@ def locate_period_doubling(
         sol = solve_periodic(model, omega, harmonics=harmonics, nu=1, samples=samples, tolerance=tolerance, z0=z_prev)
         z_prev = sol.z
         mu = period_doubling_multiplier(model, sol)
-        return (mu + 1.0 if np.isfinite(mu) else 1.0), sol, mu
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), (sol, mu)
 
-    ga, sa, ma = g(omega_a)
-    gb, sb, mb = g(omega_b)
+    (ga, da), (gb, db) = g(omega_a), g(omega_b)
     if ga * gb > 0:
         raise ValueError(
             f"{rad_s_to_rpm(omega_a):.6g} and {rad_s_to_rpm(omega_b):.6g} rpm do not bracket a multiplier "
-            f"crossing -1 (most negative real multipliers {ma:.6g}, {mb:.6g})"
+            f"crossing -1 (most negative real multipliers {da[1]:.6g}, {db[1]:.6g})"
         )
-    bracket = IllinoisBracket(float(omega_a), ga, float(omega_b), gb)
-    best = (bracket.a, sa, ma) if abs(ga) < abs(gb) else (bracket.b, sb, mb)
-    for _ in range(max_steps):
-        if abs(bracket.b - bracket.a) <= speed_tolerance * max(abs(bracket.a), abs(bracket.b)):
-            break
-        c = bracket.point()
-        gc, sc, mc = g(c)
-        best = (c, sc, mc)
-        if gc == 0:
-            break
-        bracket = bracket.narrowed(c, gc)
-    omega, sol, mu = best
+    a, b = float(omega_a), float(omega_b)
+    (omega, (sol, mu), _), _ = illinois(g, a, ga, b, gb, (a, da, ga) if abs(ga) < abs(gb) else (b, db, gb),
+                                       speed_tolerance, max_steps)
     return PeriodDoublingPoint(
         float(omega), rad_s_to_rpm(float(omega)), sol, float(mu), (rad_s_to_rpm(omega_a), rad_s_to_rpm(omega_b))
     )

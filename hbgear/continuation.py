@@ -908,6 +908,25 @@ class IllinoisBracket(NamedTuple):
         return IllinoisBracket(self.a, self.fa * 0.5 if self.side == 1 else self.fa, c, fc, 1)
 
 
+def illinois(g, a, ga, b, gb, best, rel_tol, max_steps):
+    """Illinois regula falsi on ``g(x) -> (value, data)`` from the bracket ``(a, ga), (b, gb)``
+    until it is below `rel_tol` (relative to ``max(|a|, |b|)``) or a value is 0.
+
+    **Returns:** the best ``(x, data, value)`` seen (`best`: the better end's, same form) and
+    the last :class:`IllinoisBracket`.
+    """
+    bracket = IllinoisBracket(a, ga, b, gb)
+    for _ in range(max_steps):
+        if abs(bracket.b - bracket.a) <= rel_tol * max(abs(bracket.a), abs(bracket.b)) or best[2] == 0:
+            break
+        c = bracket.point()
+        gc, data = g(c)
+        if abs(gc) <= abs(best[2]):
+            best = (c, data, gc)
+        bracket = bracket.narrowed(c, gc)
+    return best, bracket
+
+
 def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
     """The turning point between two converged points: zero of the tangent's p-component along
     the arc, parametrised by ``s = t0 . (y - y0)``, by Illinois regula falsi."""

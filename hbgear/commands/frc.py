@@ -53,7 +53,7 @@ import numpy as np
 
 from ..build import build_model
 from ..cli import Command, register
-from ..continuation import IllinoisBracket, PseudoArclength, Status, continuation
+from ..continuation import PseudoArclength, Status, continuation, illinois
 from ..errors import ConvergenceError
 from ..hb import HarmonicBalance
 from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
@@ -470,8 +470,8 @@ def _locate_on_segment(model, hb, branch, i, harmonics, samples, tolerance, max_
         return None, (f"the multipliers flagged a crossing between {rad_s_to_rpm(pa):.6g} and {rad_s_to_rpm(pb):.6g} rpm "
                       f"that the exact/variational monodromy does not confirm (most negative real multipliers "
                       f"{da[1]:.6g}, {db[1]:.6g})")
-    (w, (sol, mu), _), _ = _illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
-                                     speed_tolerance, max_steps)
+    (w, (sol, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
+                                    speed_tolerance, max_steps)
     return PeriodDoublingPoint(float(w), rad_s_to_rpm(float(w)), sol, float(mu),
                                (rad_s_to_rpm(pa), rad_s_to_rpm(pb))), None
 
@@ -501,22 +501,6 @@ def _exact_bracket(g, w0, slope, pa, pb):
         step *= 4.0
 
 
-def _illinois(g, a, ga, b, gb, best, speed_tolerance, max_steps):
-    """Illinois regula falsi on ``g(w) -> (value, data)`` from the bracket ``(a, ga), (b, gb)`` until
-    it is below `speed_tolerance` relative or a value is 0. Returns the best ``(w, data, value)``
-    seen (`best`: the better end's) and the last bracket."""
-    bracket = IllinoisBracket(a, ga, b, gb)
-    for _ in range(max_steps):
-        if abs(bracket.b - bracket.a) <= speed_tolerance * max(abs(bracket.a), abs(bracket.b)) or best[2] == 0:
-            break
-        c = bracket.point()
-        gc, data = g(c)
-        if abs(gc) <= abs(best[2]):
-            best = (c, data, gc)
-        bracket = bracket.narrowed(c, gc)
-    return best, bracket
-
-
 def _hill_crossing(model, hb, solve, pa, pb, tolerance, max_steps):
     """``(w, slope)``: the -1 crossing of Hill's most negative real multiplier between `pa` and
     `pb` (to `tolerance` relative) and the slope of its ``mu + 1`` over the segment, or ``None``
@@ -534,7 +518,7 @@ def _hill_crossing(model, hb, solve, pa, pb, tolerance, max_steps):
         (ga, _), (gb, _) = g(pa), g(pb)
         if ga * gb > 0:
             return None
-        (w, _, _), _ = _illinois(g, pa, ga, pb, gb, (pa, None, ga), tolerance, max_steps)
+        (w, _, _), _ = illinois(g, pa, ga, pb, gb, (pa, None, ga), tolerance, max_steps)
     except Exception:  # noqa: BLE001 -- Hill only starts the search; the exact multipliers decide
         return None
     return w, (gb - ga) / (pb - pa)
