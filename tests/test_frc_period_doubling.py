@@ -129,6 +129,12 @@ def test_switch_off_and_cost_rule(tmp_path):
     assert period_doubling_enabled(cfg, args, model, 8, 2)[:2] == (False, False)
     linear = model.replace(contact="linear")
     assert period_doubling_enabled(cfg, args, linear, 8, 1)[:2] == (True, False)
+    # NLTV friction without backlash: a non-linear model whose nu = 2 branch friction alone bounds
+    nltv = build_model(load_config(EXAMPLE, ['friction.model="NLTV"', 'friction.law="arctan"', 'mesh.backlash_um=0']))
+    assert not nltv.is_linear and nltv.mesh_is_linear
+    locate, follow, why = period_doubling_enabled(cfg, args, nltv, 4, 1)
+    assert (locate, follow) == (True, False) and "backlash" in why
+    assert period_doubling_enabled(cfg, SimpleNamespace(period_doubling=True), nltv, 4, 1)[:2] == (True, True)
     assert not math.isnan(h_max)
 
 
