@@ -177,3 +177,12 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     fallback, fallback_calls = locate()
     assert fallback == pytest.approx(exact, rel=2e-7)
     assert fallback_calls > exact_calls
+    # a solve that fails at Hill's crossing: the whole segment is searched
+    from hbgear.errors import ConvergenceError
+
+    def failing(*a):
+        raise ConvergenceError("not converged (test)")
+
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda model, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3))
+    monkeypatch.setattr(frc_command, "_exact_bracket", failing)
+    assert locate()[0] == pytest.approx(exact, rel=2e-7)

@@ -468,7 +468,10 @@ def _locate_on_segment(model, hb, branch, i, harmonics, samples, tolerance, max_
     if _linear_equivalent(model) is None:
         hill = _hill_crossing(model, hb, solve, pa, pb, speed_tolerance * 10, max_steps)
         if hill is not None:
-            bracket = _exact_bracket(g, *hill, pa, pb)
+            try:
+                bracket = _exact_bracket(g, *hill, pa, pb)
+            except Exception:  # noqa: BLE001 -- a solve that fails near Hill's crossing: the whole segment
+                bracket = None
     if bracket is None:
         bracket = (pa, *g(pa), pb, *g(pb))
     lo, ga, da, hi, gb, db = bracket
