@@ -43,7 +43,7 @@ _enable_compilation_cache()
 def _single_threaded_runtime() -> None:
     """Run compiled programs on one XLA thread (``HBGEAR_RUNTIME_THREADS=default`` keeps JAX's).
 
-    A corrector step is ~400 small kernels (131 unknowns at H = 32); XLA:CPU hands independent
+    A corrector step is ~340 small kernels (131 unknowns at H = 32); XLA:CPU hands independent
     ones to an intra-op thread pool with one thread per CPU, and on small kernels the hand-offs
     and work stealing cost more than they win (2 cores: a point 1.0-1.3 ms with the pool,
     0.7 ms with one thread). JAX sizes that pool from the process's CPU affinity when it creates
