@@ -165,7 +165,7 @@ def period_doubling_multiplier(model, solution: PeriodicSolution) -> float:
     few harmonics its selection of the real negative multiplier (whose exponents sit at
     half-integer harmonic centres) is not reliable enough to bracket the crossing.
     """
-    from .stability import monodromy_variational, multipliers_linear
+    from .stability import monodromy_variational, most_negative_real, multipliers_linear
 
     if solution.nu != 1:
         raise ValueError("period_doubling_multiplier needs a nu = 1 solution")
@@ -174,9 +174,7 @@ def period_doubling_multiplier(model, solution: PeriodicSolution) -> float:
     else:
         phi = monodromy_variational(model, solution, float(solution.omega_pinion))
         mult = np.linalg.eigvals(phi)
-    real = np.abs(mult.imag) <= 1e-6 * np.maximum(np.abs(mult), 1.0)
-    negative = mult.real[real & (mult.real < 0)]
-    return float(np.min(negative)) if negative.size else math.nan
+    return most_negative_real(mult)
 
 
 def locate_period_doubling(

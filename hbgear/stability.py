@@ -55,6 +55,7 @@ __all__ = [
     "hill_multipliers_batch",
     "is_stable",
     "max_abs_multiplier",
+    "most_negative_real",
     "model_at_contact_ratio",
     "monodromy_linear",
     "monodromy_ltv_a",
@@ -115,9 +116,14 @@ def period_doubling(multipliers, tol: float = 1e-9) -> bool:
     "Real" means ``|Im mu| <= 1e-6 |mu|`` (a complex pair that collided on the negative real axis
     becomes real there).
     """
+    return bool(most_negative_real(multipliers) < -1.0 - tol)
+
+
+def most_negative_real(multipliers) -> float:
+    """The most negative real multiplier (``nan`` if none); "real" as in :func:`period_doubling`."""
     m = np.asarray(multipliers)
-    real = np.abs(m.imag) <= 1e-6 * np.maximum(np.abs(m), 1.0)
-    return bool(np.any(real & (m.real < -1.0 - tol)))
+    negative = m.real[(np.abs(m.imag) <= 1e-6 * np.maximum(np.abs(m), 1.0)) & (m.real < 0)]
+    return float(np.min(negative)) if negative.size else float("nan")
 
 
 def classify(multipliers, tol: float = 1e-9) -> StabilityInfo:

@@ -514,14 +514,13 @@ def _hill_crossing(model, hb, solve, pa, pb, tolerance, max_steps):
     """``(w, slope)``: the -1 crossing of Hill's most negative real multiplier between `pa` and
     `pb` (to `tolerance` relative) and the slope of its ``mu + 1`` over the segment, or ``None``
     when Hill's multipliers do not bracket a crossing there (or fail)."""
-    from ..stability import hill_multipliers
+    from ..stability import hill_multipliers, most_negative_real
 
     system = GearSystem(model)
 
     def g(w):
-        mult = np.asarray(hill_multipliers(hb, solve(w).z, w, system))
-        negative = mult.real[(np.abs(mult.imag) <= 1e-6 * np.maximum(np.abs(mult), 1.0)) & (mult.real < 0)]
-        return (float(np.min(negative)) + 1.0 if negative.size else 1.0), None
+        mu = most_negative_real(hill_multipliers(hb, solve(w).z, w, system))
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), None
 
     try:
         (ga, _), (gb, _) = g(pa), g(pb)
