@@ -5,8 +5,8 @@ Two curves, each run once to compile and then ``--repeats`` times (median of ``t
 - ``duffing``: ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos wt``, H=7, N=64, w 0.5 -> 2 (the curve of
   ``tests/test_continuation.py``: ``PseudoArclength()``, tolerance 1e-10);
 - ``gear``: the reference pair as configured in ``examples/paper_table1.toml`` (LTV, H=32, N=256,
-  tolerance 1e-9), 12000 -> 15000 rpm, with :func:`hbgear.commands.frc.gear_residual_functions`
-  and :func:`~hbgear.commands.frc.frc_method`.
+  tolerance 1e-9), 12000 -> 15000 rpm, with :func:`hbgear.engine.hb.residual_functions`
+  and :func:`~hbgear.engine.continuation.sweep_method`.
 
 The residual functions are wrapped with call counters (the wrappers cost ~1 us per call); the
 same wrapped callables are passed to every run of a version (``jit_step`` then traces once, in
@@ -57,8 +57,8 @@ class Counted:
 def duffing_problem():
     import jax.numpy as jnp
 
-    from hbgear.hb import HarmonicBalance
-    from hbgear.system import Duffing
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.system import Duffing
 
     hb, system = HarmonicBalance(1, 7, 1, 64), Duffing(damping=0.02, stiffness=1.0, cubic=0.1, forcing=0.05)
 
@@ -77,10 +77,11 @@ def duffing_problem():
 
 def gear_problem():
     from hbgear import build_model, load_config
-    from hbgear.commands.frc import frc_method, gear_residual_functions
-    from hbgear.hb import HarmonicBalance
-    from hbgear.solve import rpm_to_rad_s, solve_periodic
-    from hbgear.system import GearSystem
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.continuation import sweep_method
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+    from hbgear.gear.system import GearSystem
 
     cfg = load_config(CONFIG, [])
     model = build_model(cfg)
@@ -88,7 +89,7 @@ def gear_problem():
     w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
     start = solve_periodic(model, w0, harmonics=H, samples=N, tolerance=tol)
     hb, system = HarmonicBalance(model.ndof, H, 1, N), GearSystem(model)
-    rj3, r3, fixed = gear_residual_functions(hb, system)
+    rj3, r3, fixed = residual_functions(hb, system)
 
     def rj(z, p):  # bound here: the versions compared need not know continuation's `args`
         return rj3(z, p, *fixed)
@@ -97,7 +98,7 @@ def gear_problem():
         return r3(z, p, *fixed)
 
     def method(module, **kw):
-        base = frc_method(w0, w1)
+        base = sweep_method(w0, w1)
         known = {f.name for f in dataclasses.fields(module.PseudoArclength)}
         fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in known}
         return module.PseudoArclength(**{**fields, **kw})
@@ -155,7 +156,7 @@ def main(argv=None):
     parser.add_argument("--problems", default="duffing,gear")
     parser.add_argument("--variants", default="default,chord,jit")
     args = parser.parse_args(argv)
-    import hbgear.continuation as current
+    import hbgear.engine.continuation as current
 
     field_names = {f.name for f in dataclasses.fields(current.PseudoArclength)}
     runs = []

@@ -3,10 +3,10 @@ r"""Duffing frequency response: hbgear against other Python harmonic-balance too
 Problem: ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos(w t)``, ``w`` in ``[0.5, 2]`` [rad/s],
 ``H = 7`` harmonics, ``N = 64`` time samples per period (AFT) for every tool.
 
-- **hbgear**: :func:`hbgear.continuation.continuation` on :class:`hbgear.system.Duffing`,
+- **hbgear**: :func:`hbgear.engine.continuation.continuation` on :class:`hbgear.engine.system.Duffing`,
   Newton tolerance ``1e-9`` on ``max |R|``, then Hill's method on every point, timed
-  separately: batched over the curve (:func:`hbgear.stability.hill_multipliers_batch`, as
-  ``hbgear frc`` does) and, for the ratio, one :func:`hbgear.stability.hill_multipliers` call
+  separately: batched over the curve (:func:`hbgear.engine.floquet.hill_multipliers_batch`, as
+  ``hbgear frc`` does) and, for the ratio, one :func:`hbgear.engine.floquet.hill_multipliers` call
   per point.
 - **pyHarm** (PyPI ``pyharm-os``): installed into its own virtual environment
   ``benchmarks/.venv-others`` (created on first use with ``python3 -m venv`` and ``pip``),
@@ -105,10 +105,10 @@ def branch_error(ws, coeffs, checks):
 def run_hbgear(repeats, ds_max=0.05):
     import jax.numpy as jnp
 
-    from hbgear.continuation import PseudoArclength, continuation
-    from hbgear.hb import HarmonicBalance
-    from hbgear.stability import hill_multipliers, hill_multipliers_batch, is_stable
-    from hbgear.system import Duffing
+    from hbgear.engine.continuation import PseudoArclength, continuation
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.floquet import hill_multipliers, hill_multipliers_batch, is_stable
+    from hbgear.engine.system import Duffing
 
     t0 = time.perf_counter()
     hb = HarmonicBalance(1, H, 1, SAMPLES)

@@ -4,9 +4,9 @@ Model: ``examples/paper_table1.toml`` with ``friction.model = NLTV``, ``friction
 (``v0 = 0.01 m/s``), the soft output spring of the example, ``H = 32``, ``N`` = the solver default
 (1024 AFT samples, jump-corrected).
 
-- **HB**: the ``hbgear frc`` flow without outputs: :func:`hbgear.continuation.continuation`
-  from :func:`hbgear.solve.start_guess` (the quasi-static state, corrected at the start speed
-  inside the compiled corrector) with :func:`hbgear.commands.frc.frc_method` (the compiled
+- **HB**: the ``hbgear frc`` flow without outputs: :func:`hbgear.engine.continuation.continuation`
+  from :func:`hbgear.gear.solve.start_guess` (the quasi-static state, corrected at the start speed
+  inside the compiled corrector) with :func:`hbgear.engine.continuation.sweep_method` (the compiled
   chord corrector) over 3000 -> 20000 rpm, tolerance 1e-9. The first run compiles the
   corrector; the curve is then repeated ``repeats`` times (median). First-curve overhead =
   first run - median run (``Branch.start_seconds`` of the first run: compilation + start);
@@ -15,7 +15,7 @@ Model: ``examples/paper_table1.toml`` with ``friction.model = NLTV``, ``friction
   Then, in a fresh Python process sharing the disk cache, the first curve of **another gear
   pair** (torque x 1.3, mesh damping x 1.5): its parameters are arguments of the compiled
   program, so it loads from the cache instead of compiling (``--first-curve``).
-- **TI**: :func:`hbgear.simulate.simulate` (``solve_ivp`` LSODA from the static state until the
+- **TI**: :func:`hbgear.gear.simulate.simulate` (``solve_ivp`` LSODA from the static state until the
   DTE changes by less than ``steady_tolerance`` of its peak-to-peak between periods) at two
   tolerances: ``rtol 1e-9`` (steady 1e-6, the default) and ``rtol 1e-6`` (steady 1e-4), at a
   sample of the curve's own points (nearest to evenly spaced speeds, away from the folds), one
@@ -64,21 +64,21 @@ TI_SETTINGS = ((1e-9, 1e-6), (1e-6, 1e-4))  # (rtol, steady_tolerance) of the tw
 
 
 def hb_method(w0, w1):
-    from hbgear.commands.frc import frc_method
+    from hbgear.engine.continuation import sweep_method
 
-    return frc_method(w0, w1)  # the compiled chord corrector, as `hbgear frc` runs it
+    return sweep_method(w0, w1)  # the compiled chord corrector, as `hbgear frc` runs it
 
 
 def hb_curve(model, rpm0, rpm1, repeats):
-    from hbgear.commands.frc import gear_residual_functions
-    from hbgear.continuation import continuation
-    from hbgear.hb import HarmonicBalance
-    from hbgear.solve import rpm_to_rad_s, start_guess
-    from hbgear.system import GearSystem
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.continuation import continuation
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.solve import rpm_to_rad_s, start_guess
+    from hbgear.gear.system import GearSystem
 
     w0, w1 = rpm_to_rad_s(rpm0), rpm_to_rad_s(rpm1)
     hb, system = HarmonicBalance(model.ndof, H, 1, SAMPLES), GearSystem(model)
-    rjp, res, fixed = gear_residual_functions(hb, system)
+    rjp, res, fixed = residual_functions(hb, system)
     z0 = start_guess(model, hb, system)
     method = hb_method(w0, w1)
     times, starts, branch = [], [], None
@@ -147,8 +147,8 @@ def sample_indices(branch, count):
 
 
 def ti_compare(model, hb, branch, indices, rtol, steady_tolerance):
-    from hbgear.simulate import simulate
-    from hbgear.solve import PeriodicSolution
+    from hbgear.gear.simulate import simulate
+    from hbgear.gear.solve import PeriodicSolution
 
     rows = []
     try:  # warm-up (JIT of the right-hand side); a short run never reaches steady state

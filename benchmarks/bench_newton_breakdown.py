@@ -1,6 +1,6 @@
 r"""Where the time of a continuation step goes, and what faster variants would save.
 
-Part 1 -- **breakdown** of :func:`hbgear.continuation.continuation` on the NLTV reference pair
+Part 1 -- **breakdown** of :func:`hbgear.engine.continuation.continuation` on the NLTV reference pair
 (``examples/paper_table1.toml``, ``friction.model = NLTV``, ``law = arctan``, ``H = 32``,
 ``N = 256``) over a part of the speed range. The residual functions passed in are wrapped with
 ``time.perf_counter`` (including ``block_until_ready`` and the copy to numpy), and, for the
@@ -19,7 +19,7 @@ Part 3 -- **prototypes** (here only, hbgear is not modified), each checked again
 own result:
 
 - ``toeplitz J``: the AFT part of the Jacobian as convolution matrices of the sampled pointwise
-  derivatives ``dQ_nl/dq``, ``dQ_nl/dq'`` (one ``rfft`` each, :func:`hbgear.fourier.convolution_matrix`)
+  derivatives ``dQ_nl/dq``, ``dQ_nl/dq'`` (one ``rfft`` each, :func:`hbgear.engine.fourier.convolution_matrix`)
   instead of ``jax.jacfwd`` pushing ``ndof (2H+1)`` tangents through the whole residual.
 - ``fused (R, J, dR/dp)``: one ``jax.jvp`` in ``p`` gives ``R``, ``dR/dp`` and the operator
   (built once, primal and tangent together) + the Toeplitz Jacobian.
@@ -96,8 +96,8 @@ def timed_linalg(timer):
 def setup():
     from hbgear.build import build_model
     from hbgear.config import load_config
-    from hbgear.hb import HarmonicBalance
-    from hbgear.system import GearSystem
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.system import GearSystem
 
     model = build_model(load_config(CONFIG, OVERRIDES))
     return model, HarmonicBalance(model.ndof, H, 1, SAMPLES), GearSystem(model)
@@ -107,13 +107,14 @@ def setup():
 def breakdown(model, hb, system, rpm0, rpm1):
     import jax
 
-    from hbgear.commands.frc import frc_method, gear_residual_functions
-    from hbgear.continuation import continuation
-    from hbgear.solve import rpm_to_rad_s, solve_periodic
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.continuation import sweep_method
+    from hbgear.engine.continuation import continuation
+    from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
     w0, w1 = rpm_to_rad_s(rpm0), rpm_to_rad_s(rpm1)
     start = solve_periodic(model, w0, harmonics=H, samples=SAMPLES, tolerance=TOL)
-    rjp, res, fixed = gear_residual_functions(hb, system)
+    rjp, res, fixed = residual_functions(hb, system)
     timer = Timer()
 
     def rjp_np(z, p):
@@ -126,7 +127,7 @@ def breakdown(model, hb, system, rpm0, rpm1):
     with timed_linalg(timer):
         a = time.perf_counter()
         branch = continuation(timer.wrap("eval (R,J,dR/dp)", rjp_np), timer.wrap("eval R (line search)", res_np),
-                              start.z, w0, w1, dataclasses.replace(frc_method(w0, w1), jit_step=False, chord=False),
+                              start.z, w0, w1, dataclasses.replace(sweep_method(w0, w1), jit_step=False, chord=False),
                               max_points=6000, tolerance=TOL, progress=False)
         wall = time.perf_counter() - a
     size = hb.size + 1
@@ -142,7 +143,7 @@ def breakdown(model, hb, system, rpm0, rpm1):
     steps_per_point = steps / len(branch)
     compiled = {}
     for label, chord in (("compiled Newton", False), ("compiled chord", True)):
-        method = dataclasses.replace(frc_method(w0, w1), jit_step=True, chord=chord)
+        method = dataclasses.replace(sweep_method(w0, w1), jit_step=True, chord=chord)
         times, ratios = [], []
         for k in range(COMPILED_REPEATS + 1):  # the first run compiles the corrector
             floor = floor_ms() if k else None  # measured next to each timed run: the pair's ratio
@@ -165,8 +166,8 @@ def prototypes(model, hb, system):
     import jax
     import jax.numpy as jnp
 
-    from hbgear import fourier
-    from hbgear.solve import rpm_to_rad_s, solve_periodic
+    from hbgear.engine import fourier
+    from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
     w = rpm_to_rad_s(13000.0)
     z = jnp.asarray(solve_periodic(model, w, harmonics=H, samples=SAMPLES, tolerance=TOL).z)

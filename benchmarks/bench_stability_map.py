@@ -1,11 +1,11 @@
 r"""Stability maps: exact monodromy for LTV-A, Hill's method for NLTV.
 
-- **LTV-A map**: :func:`hbgear.stability.stability_map_ltv_a` on ``examples/paper_table1.toml``
+- **LTV-A map**: :func:`hbgear.gear.maps.stability_map_ltv_a` on ``examples/paper_table1.toml``
   (its own LTV formulation-A friction), 100 speeds (20000 -> 32000 rpm) x 50 contact ratios
   (1.35 -> 1.65); one warm-up call on a 2 x 2 grid, then the full map ``repeats`` times (median).
   The models (one per contact ratio) are built inside the timed call, as ``hbgear
   stability-map`` does.
-- **NLTV Hill map**: :func:`hbgear.stability.stability_map` with ``friction.model = NLTV``,
+- **NLTV Hill map**: :func:`hbgear.gear.maps.stability_map` with ``friction.model = NLTV``,
   ``law = arctan``, ``H = 32`` on a small grid (harmonic balance at each point, warm-started
   along the speeds, then Hill's method); per-point time. A second timing splits one point into
   its HB solve and its Hill step, the latter both ways: ``method="refined"`` (the default at
@@ -32,7 +32,7 @@ CONFIG = ROOT / "examples" / "paper_table1.toml"
 
 def run(quick=False, repeats=None):
     from hbgear.config import load_config
-    from hbgear.stability import stability_map, stability_map_ltv_a
+    from hbgear.gear.maps import stability_map, stability_map_ltv_a
 
     repeats = repeats or (2 if quick else 5)
     cfg = load_config(CONFIG, [])
@@ -65,10 +65,10 @@ def run(quick=False, repeats=None):
 
     # one point split: HB solve (cold start from the LTV solution, as the map's first speed) vs Hill
     from hbgear.build import build_model
-    from hbgear.hb import HarmonicBalance
-    from hbgear.solve import rpm_to_rad_s, solve_periodic
-    from hbgear.stability import hill_multipliers
-    from hbgear.system import GearSystem
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+    from hbgear.engine.floquet import hill_multipliers
+    from hbgear.gear.system import GearSystem
 
     model = build_model(ncfg)
     w = rpm_to_rad_s(26000.0)

@@ -17,7 +17,7 @@ import numpy as np
 
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 4500.0
 cfg = load_config("examples/paper_table1.toml", ["friction.model='NLTV'", "boundary.damping_ratio=0.1"])

@@ -20,12 +20,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hbgear.build import build_model
-from hbgear.commands.frc import gear_residual_functions
+from hbgear.engine.hb import residual_functions
 from hbgear.config import load_config
-from hbgear.continuation import PseudoArclength, continuation
-from hbgear.hb import HarmonicBalance
-from hbgear.solve import rpm_to_rad_s, solve_periodic
-from hbgear.system import GearSystem
+from hbgear.engine.continuation import PseudoArclength, continuation
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import GearSystem
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 12500.0
 t_start, t_stop = 400.0, 40.0  # pinion torque range [N m]
@@ -36,7 +36,7 @@ start = solve_periodic(model, omega, harmonics=24, samples=512)
 
 hb = HarmonicBalance(model.ndof, 24, 1, 512)
 system = GearSystem(model, omega_pinion=omega, parameter="torque_pinion_Nm")
-residual_and_jacobians, residual, fixed = gear_residual_functions(hb, system)
+residual_and_jacobians, residual, fixed = residual_functions(hb, system)
 branch = continuation(residual_and_jacobians, residual, start.z, t_start, t_stop,
                       PseudoArclength(ds=0.02, ds_max=0.1), max_points=400, progress=True, args=fixed)
 print(f"{branch.status.name}: {len(branch)} points, folds at {np.round(branch.fold_p, 1)} N m")

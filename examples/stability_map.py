@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hbgear.config import load_config
-from hbgear.stability import stability_map_ltv_a
+from hbgear.gear.maps import stability_map_ltv_a
 
 cfg = load_config("examples/paper_table1.toml", ["boundary.output='torques'", "friction.model='LTV'"])
 speeds = np.linspace(20000.0, 32000.0, 121)  # [rpm]

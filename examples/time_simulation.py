@@ -17,8 +17,8 @@ import numpy as np
 
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.simulate import simulate
-from hbgear.solve import rpm_to_rad_s
+from hbgear.gear.simulate import simulate
+from hbgear.gear.solve import rpm_to_rad_s
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 3000.0
 overrides = ["friction.model='NLTV'", "friction.formulation='B'", "boundary.damping_ratio=0.1"]

@@ -96,16 +96,17 @@ def _single_threaded_runtime() -> None:
 _single_threaded_runtime()
 
 from .build import build_model as build_model  # noqa: E402
-from .continuation import Branch as Branch, PseudoArclength as PseudoArclength  # noqa: E402
+from .engine.continuation import Branch as Branch, PseudoArclength as PseudoArclength  # noqa: E402
 from .config import load_config as load_config  # noqa: E402
 from .errors import ConfigError as ConfigError, ConvergenceError as ConvergenceError  # noqa: E402
-from .friction import Arctan as Arctan, Coulomb as Coulomb, KelleyLemanski as KelleyLemanski  # noqa: E402
-from .friction import NoFriction as NoFriction  # noqa: E402
-from .geometry import GearPair as GearPair  # noqa: E402
-from .model import GearPairModel as GearPairModel  # noqa: E402
-from .solve import PeriodicSolution as PeriodicSolution, rpm_to_rad_s as rpm_to_rad_s  # noqa: E402
-from .solve import solve_periodic as solve_periodic  # noqa: E402
-from .system import Duffing as Duffing, GearSystem as GearSystem  # noqa: E402
+from .gear.friction import Arctan as Arctan, Coulomb as Coulomb, KelleyLemanski as KelleyLemanski  # noqa: E402
+from .gear.friction import NoFriction as NoFriction  # noqa: E402
+from .gear.geometry import GearPair as GearPair  # noqa: E402
+from .gear.model import GearPairModel as GearPairModel  # noqa: E402
+from .gear.solve import PeriodicSolution as PeriodicSolution, rpm_to_rad_s as rpm_to_rad_s  # noqa: E402
+from .gear.solve import solve_periodic as solve_periodic  # noqa: E402
+from .gear.system import GearSystem as GearSystem  # noqa: E402
+from .engine.system import Duffing as Duffing  # noqa: E402
 
 try:
     __version__ = version("hbgear")

@@ -1,4 +1,4 @@
-"""Config -> physics: build a :class:`~hbgear.model.GearPairModel` from a ``RunConfig``.
+"""Config -> physics: build a :class:`~hbgear.gear.model.GearPairModel` from a ``RunConfig``.
 
 Checks that need the physics (geometry, model combinations) raise
 :class:`~hbgear.errors.ConfigError` naming the key, like the config loader does.
@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ConfigError
-from .friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
-from .geometry import GearPair
-from .model import GearPairModel
+from .gear.friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
+from .gear.geometry import GearPair
+from .gear.model import GearPairModel
 
 __all__ = ["build_geometry", "build_model", "friction_law"]
 

@@ -1,4 +1,4 @@
-"""Period doubling, backlash folds and time-integration sweeps (hbgear.bifurcation).
+"""Period doubling, backlash folds and time-integration sweeps (hbgear.gear.bifurcation).
 
 The reference pair of ``examples/backlash.toml`` reduced to the DTE alone (boundary "torques",
 no friction): the cheapest model that has both the parametric tongue around ``w_m = 2 w_n``
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hbgear.bifurcation import (
+from hbgear.gear.bifurcation import (
     backlash_frc,
     continue_period_doubled,
     embed_subharmonic,
@@ -24,11 +24,11 @@ from hbgear.bifurcation import (
 )
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.hb import HarmonicBalance
-from hbgear.simulate import simulate
-from hbgear.solve import PeriodicSolution, rpm_to_rad_s, solve_periodic
-from hbgear.stability import multipliers_linear
-from hbgear.system import GearSystem
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.simulate import simulate
+from hbgear.gear.solve import PeriodicSolution, rpm_to_rad_s, solve_periodic
+from hbgear.gear.monodromy import multipliers_linear
+from hbgear.gear.system import GearSystem
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "backlash.toml"
 H1, N1 = 8, 256  # shared by every nu = 1 solve below: one compilation

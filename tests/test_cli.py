@@ -8,7 +8,7 @@ import pytest
 
 from hbgear import cli
 from hbgear.errors import ConfigError, ConvergenceError
-from hbgear.io import write_json_atomic
+from hbgear.outputs.io import write_json_atomic
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
 

@@ -1,4 +1,4 @@
-"""hbgear.continuation: pseudo-arclength continuation, folds, landing, statuses; `hbgear frc`.
+"""hbgear.engine.continuation: pseudo-arclength continuation, folds, landing, statuses; `hbgear frc`.
 
 Known answers: the Duffing oscillator ``x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos wt`` (its H=1
 jump frequencies from the discriminant of the amplitude--frequency cubic, its backbone), a
@@ -18,10 +18,11 @@ import pytest
 from scipy.optimize import brentq
 
 from hbgear import build_model, load_config
-from hbgear.continuation import Branch, PointKind, PseudoArclength, Status, continuation
-from hbgear.hb import HarmonicBalance
-from hbgear.solve import rpm_to_rad_s, solve_periodic
-from hbgear.system import Duffing, GearSystem
+from hbgear.engine.continuation import Branch, PointKind, PseudoArclength, Status, continuation
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import GearSystem
+from hbgear.engine.system import Duffing
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
 C, K, A, F = 0.02, 1.0, 0.1, 0.05
@@ -203,10 +204,11 @@ def gear():
     assert model.is_linear and model.ndof == 1
     w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
     start = solve_periodic(model, w0, harmonics=8, samples=64, tolerance=1e-12)
-    from hbgear.commands.frc import frc_method, gear_residual_functions
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.continuation import sweep_method
 
-    rj, r, fixed = gear_residual_functions(HB_GEAR, GearSystem(model))
-    branch = continuation(rj, r, start.z, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
+    rj, r, fixed = residual_functions(HB_GEAR, GearSystem(model))
+    branch = continuation(rj, r, start.z, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
     return model, branch
 
 
@@ -269,24 +271,25 @@ def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
     parameters are arguments of it, not constants) and gets its own curve, equal to the Python
     corrector's; its start, corrected from `start_guess` inside the compiled corrector, is
     solve_periodic's solution. Stale constants would give the first pair's curve."""
-    from hbgear.commands.frc import frc_method, gear_residual_functions
-    from hbgear.continuation import _JIT_CACHE
-    from hbgear.solve import start_guess
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.continuation import sweep_method
+    from hbgear.engine.continuation import _JIT_CACHE
+    from hbgear.gear.solve import start_guess
 
     model, first = gear
     other = model.replace(torque_pinion_Nm=1.7 * model.torque_pinion_Nm, damping_ratio=1.5 * model.damping_ratio)
     w0, w1 = rpm_to_rad_s(12000.0), rpm_to_rad_s(15000.0)
-    rj, r, fixed = gear_residual_functions(HB_GEAR, GearSystem(other))
-    assert rj is gear_residual_functions(HB_GEAR, GearSystem(model))[0]
+    rj, r, fixed = residual_functions(HB_GEAR, GearSystem(other))
+    assert rj is residual_functions(HB_GEAR, GearSystem(model))[0]
     compiled = _JIT_CACHE[(rj, r, HB_GEAR.size)][0]
     programs = compiled._cache_size()
     guess = start_guess(other, HB_GEAR, GearSystem(other))
-    branch = continuation(rj, r, guess, w0, w1, frc_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
+    branch = continuation(rj, r, guess, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
     assert compiled._cache_size() == programs  # no new trace for the new pair
     assert branch.status == Status.SUCCESS, branch.message
     start = solve_periodic(other, w0, harmonics=8, samples=64, tolerance=1e-12)
     assert np.max(np.abs(branch.z[0] - start.z)) <= 1e-9 * np.max(np.abs(start.z))
-    python = continuation(rj, r, start.z, w0, w1, dataclasses.replace(frc_method(w0, w1), jit_step=False, chord=False),
+    python = continuation(rj, r, start.z, w0, w1, dataclasses.replace(sweep_method(w0, w1), jit_step=False, chord=False),
                           tolerance=1e-12, max_points=4000, args=fixed)
     assert len(branch) == len(python)
     np.testing.assert_allclose(branch.p, python.p, rtol=1e-9)
@@ -297,7 +300,7 @@ def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
 def test_frc_falls_back_to_solve_periodic_when_the_start_guess_fails(tmp_path, monkeypatch):
     """A start guess Newton cannot use (NaN here) costs only the detour: the curve is the same as
     from the regular guess, started from solve_periodic's staged start."""
-    import hbgear.commands.frc as frc_module
+    import hbgear.cli.frc as frc_module
     from hbgear import cli
 
     def run(out):
@@ -362,7 +365,7 @@ def test_jit_step_failures_and_fallback():
 
 
 def _correctors(hb, system, scale):
-    from hbgear.continuation import _jit_corrector, _python_corrector
+    from hbgear.engine.continuation import _jit_corrector, _python_corrector
 
     rj, r = problem(hb, system)
     compiled = _jit_corrector(rj, r, hb.size)
@@ -373,7 +376,7 @@ def test_compiled_chord_step_equals_the_python_newton_corrector(duffing_h7):
     """From the same predictor, the chord corrector (LU of the previous point, Sherman--Morrison
     for the new border row) lands on the Python Newton corrector's point, with its tangent; a
     factorisation from far away fails to contract and the Newton restart still lands there."""
-    from hbgear.continuation import _Compiled
+    from hbgear.engine.continuation import _Compiled
 
     scale = 2.0
     python, compiled = _correctors(HB7, DUFFING, scale)
@@ -417,7 +420,7 @@ def test_step_control_counts_a_chord_iteration_as_half_a_newton_iteration(duffin
     chord corrector's slower, linear convergence does not shrink the steps: its branch has about
     as many points as the Newton corrector's (counting chord iterations as Newton ones gave
     ~2.7x as many on this curve)."""
-    from hbgear.continuation import CHORD_ITERATION_WORK, _Compiled
+    from hbgear.engine.continuation import CHORD_ITERATION_WORK, _Compiled
 
     scale = 2.0
     python, compiled = _correctors(HB7, DUFFING, scale)
@@ -446,7 +449,7 @@ def test_compiled_line_search_equals_the_python_corrector():
     """Newton on atan(5 z) = 0.3 overshoots from |5 z| > 1.4: the backtracking line search runs.
     The compiled corrector (its line search as loop turns) lands where the Python one does,
     with the same iteration counts, and fails the same way where both fail."""
-    from hbgear.continuation import _Compiled, _jit_corrector, _python_corrector
+    from hbgear.engine.continuation import _Compiled, _jit_corrector, _python_corrector
 
     def rj(z, p):
         return jnp.stack([jnp.arctan(5 * z[0]) - 0.3 * p]), jnp.array([[5 / (1 + 25 * z[0] ** 2)]]), jnp.array([-0.3])

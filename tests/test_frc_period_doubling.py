@@ -1,4 +1,4 @@
-"""`hbgear frc` follows period-doubled (nu = 2) branches (hbgear.commands.frc).
+"""`hbgear frc` follows period-doubled (nu = 2) branches (hbgear.cli.frc).
 
 The backlash pair of ``examples/backlash.toml`` reduced to the DTE alone (boundary "torques",
 no friction, zeta 0.05), swept 29,000 -> 27,000 rpm with H = 8: the upper edge of the
@@ -19,13 +19,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hbgear.bifurcation import embed_subharmonic, half_order_indices, solve_period_doubled
+from hbgear.gear.bifurcation import embed_subharmonic, half_order_indices, solve_period_doubled
 from hbgear.build import build_model
 from hbgear.cli import main
-from hbgear.commands.frc import COLUMNS, PD_AUTO_MAX_UNKNOWNS, period_doubling_enabled
+from hbgear.cli.frc import COLUMNS, PD_AUTO_MAX_UNKNOWNS, period_doubling_enabled
 from hbgear.config import load_config
-from hbgear.simulate import simulate
-from hbgear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.simulate import simulate
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "backlash.toml"
 SETS = ['boundary.output="torques"', "solver.harmonics=8", "solver.time_samples=256",
@@ -143,9 +143,9 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     needs the variational monodromy. Started from Hill's crossing (0.23 rpm off the exact one at
     this N) it is the crossing of the exact search over the whole segment (to the speed
     tolerance) for fewer monodromies; a misleading Hill start still ends on it."""
-    from hbgear import stability
-    from hbgear.commands import frc as frc_command
-    from hbgear.hb import HarmonicBalance
+    from hbgear.gear import monodromy as stability
+    from hbgear.cli import frc as frc_command
+    from hbgear.engine.hb import HarmonicBalance
 
     model = build_model(load_config(Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml",
                                     ["friction.model='NLTV'", "friction.law='arctan'"]))

@@ -7,7 +7,7 @@ import pytest
 from hbgear.build import build_model
 from hbgear.config import parse_config
 from hbgear.errors import ConfigError
-from hbgear.geometry import GearPair
+from hbgear.gear.geometry import GearPair
 
 PHI = math.radians(20.0)
 REF = dict(teeth_pinion=25, teeth_gear=31, module_m=3.175e-3, pressure_angle_rad=PHI)

@@ -9,13 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hbgear import fourier
+from hbgear.engine import fourier
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.hb import HarmonicBalance
-from hbgear.simulate import simulate
-from hbgear.solve import auto_harmonics, rpm_to_rad_s, solve_periodic
-from hbgear.system import GearSystem
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.simulate import simulate
+from hbgear.gear.solve import auto_harmonics, rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import GearSystem
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
 
@@ -220,7 +220,7 @@ def test_frozen_pieces_first_asked_for_under_a_trace_are_concrete_and_equal():
     arrays, equal to those built outside a trace."""
     import jax
 
-    from hbgear import hb as hb_module
+    from hbgear.engine import hb as hb_module
 
     model = model_with("friction.model=NLTV", "friction.law=arctan")
     hb, system = HarmonicBalance(model.ndof, 6, 1, 64), GearSystem(model)
@@ -260,10 +260,10 @@ def test_nonlinear_start_from_the_quasi_static_state_equals_the_ltv_start(speed_
 @pytest.mark.parametrize("formulation", ["A", "B"])
 def test_aft_jump_correction_converges_at_second_order(formulation):
     """The AFT projection of NLTV friction (load shares jump at pair entry and exit) against the
-    composite Gauss-Legendre quadrature between the breakpoints (hbgear.quadrature, an
+    composite Gauss-Legendre quadrature between the breakpoints (hbgear.engine.quadrature, an
     independent route): sampled plainly it errs at O(1/N); with the jump correction at O(1/N^2),
     and far below the plain projection at the same N."""
-    from hbgear.quadrature import fourier_coefficients, mesh_period_rule
+    from hbgear.engine.quadrature import fourier_coefficients, mesh_period_rule
 
     model = model_with("friction.model=NLTV", "friction.law=arctan", "friction.v0_m_per_s=0.5",
                        f"friction.formulation={formulation}")
@@ -304,7 +304,7 @@ def test_aft_jump_correction_converges_at_second_order(formulation):
 def test_batched_read_outs_equal_each_point_summary(overrides, nu):
     """`read_outs` (a curve's read-outs in batches) gives each point its own summary: no mixing
     of points, the same reaction slot, wind-up and STE velocity per point."""
-    from hbgear.solve import PeriodicSolution, read_outs
+    from hbgear.gear.solve import PeriodicSolution, read_outs
 
     model = build_model(load_config(EXAMPLE, overrides))
     h, n = 8 * nu, 64 * nu

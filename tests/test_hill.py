@@ -1,4 +1,4 @@
-"""hbgear.hill: the refined central exponents equal the dense selection, batches equal single
+"""hbgear.engine.hill: the refined central exponents equal the dense selection, batches equal single
 points, the copy walk and the real-negative-multiplier copies."""
 
 from pathlib import Path
@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from hbgear import hill
-from hbgear import stability as st
+from hbgear.engine import hill
+from hbgear.engine import floquet
+from hbgear.gear import monodromy
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.hb import HarmonicBalance
-from hbgear.solve import rpm_to_rad_s, solve_periodic
-from hbgear.system import Duffing, GearSystem
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import GearSystem
+from hbgear.engine.system import Duffing
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
 
@@ -38,7 +40,7 @@ def quadratic_at(model, rpm, harmonics=32, samples=256):
     w = rpm_to_rad_s(rpm)
     sol = solve_periodic(model, w, harmonics=harmonics, samples=samples)
     a0, a1, a2, _ = hill.hill_quadratic(hb, sol.z[None], [w], system)
-    zero_tol = st.TRIVIAL_TOL / (2 * np.pi) if system.free_mean_dof is not None else None
+    zero_tol = floquet.TRIVIAL_TOL / (2 * np.pi) if system.free_mean_dof is not None else None
     return a0, a1, a2, zero_tol
 
 
@@ -108,13 +110,13 @@ def test_hill_exponents_methods_agree_and_validate_method():
     w = rpm_to_rad_s(8000.0)
     z = solve_periodic(model, w, harmonics=32, samples=256).z
     system = GearSystem(model)
-    lam_r, mult_r = st.hill_exponents(hb, z, w, system, method="refined")
-    lam_d, mult_d = st.hill_exponents(hb, z, w, system, method="dense")
+    lam_r, mult_r = floquet.hill_exponents(hb, z, w, system, method="refined")
+    lam_d, mult_d = floquet.hill_exponents(hb, z, w, system, method="dense")
     assert max_pair_distance(mult_r, mult_d) < 1e-8
     assert max_pair_distance(lam_r, lam_d) < 1e-8
     assert np.all(np.diff(np.abs(mult_r)) <= 0)  # sorted by decreasing modulus
     with pytest.raises(ValueError, match="method"):
-        st.hill_exponents(hb, z, w, system, method="arnoldi")
+        floquet.hill_exponents(hb, z, w, system, method="arnoldi")
 
 
 def test_refined_falls_back_to_dense_when_not_confident(monkeypatch):
@@ -133,7 +135,7 @@ def test_refined_falls_back_to_dense_when_not_confident(monkeypatch):
 
 
 def duffing_points(count=12):
-    from hbgear.continuation import PseudoArclength, continuation
+    from hbgear.engine.continuation import PseudoArclength, continuation
 
     import jax.numpy as jnp
 
@@ -149,16 +151,16 @@ def duffing_points(count=12):
 
 def test_batched_hill_equals_per_point_on_a_duffing_curve():
     hb, system, zs, ps = duffing_points(40)  # more than one chunk of 32: the padded last chunk
-    batch = st.hill_exponents_batch(hb, zs, ps, system)
+    batch = floquet.hill_exponents_batch(hb, zs, ps, system)
     assert len(batch) == len(ps)
     unstable = 0
     for (lam, mult), z, p in zip(batch, zs, ps):
-        lam1, mult1 = st.hill_exponents(hb, z, p, system)
+        lam1, mult1 = floquet.hill_exponents(hb, z, p, system)
         assert max_pair_distance(mult, mult1) < 1e-12
         assert max_pair_distance(lam, lam1) < 1e-12
-        unstable += not st.is_stable(mult)
+        unstable += not floquet.is_stable(mult)
     assert unstable > 0  # the middle branch of the bistable band is on the curve
-    assert st.hill_multipliers_batch(hb, zs[:0], ps[:0], system) == []
+    assert floquet.hill_multipliers_batch(hb, zs[:0], ps[:0], system) == []
 
 
 def test_batched_hill_equals_per_point_on_the_gear():
@@ -167,9 +169,9 @@ def test_batched_hill_equals_per_point_on_the_gear():
     system = GearSystem(model)
     ws = rpm_to_rad_s(np.array([5000.0, 15000.0]))
     zs = np.stack([solve_periodic(model, w, harmonics=32, samples=256).z for w in ws])
-    batch = st.hill_multipliers_batch(hb, zs, ws, system)
+    batch = floquet.hill_multipliers_batch(hb, zs, ws, system)
     for m, z, w in zip(batch, zs, ws):
-        assert max_pair_distance(m, st.hill_multipliers(hb, z, w, system)) < 1e-12
+        assert max_pair_distance(m, floquet.hill_multipliers(hb, z, w, system)) < 1e-12
 
 
 # ----------------------------------------------------------------------------- copies
@@ -209,12 +211,12 @@ def test_real_negative_multiplier_copies_are_one_family():
     both real negative multipliers appear."""
     m = gear("boundary.output='torques'", "friction.model='LTV'")
     omega = rpm_to_rad_s(26800.0)
-    exact = st.multipliers_linear(m, omega)
-    assert st.period_doubling(exact) and np.all(np.abs(exact.imag) < 1e-12) and abs(exact[0] - exact[1]) > 0.1
+    exact = monodromy.multipliers_linear(m, omega)
+    assert floquet.period_doubling(exact) and np.all(np.abs(exact.imag) < 1e-12) and abs(exact[0] - exact[1]) > 0.1
     for harmonics in (4, 6, 8):  # the copies' multipliers differ by 1e-6 to 1e-5 here
         hb = HarmonicBalance(m.ndof, harmonics, 1, 4 * harmonics + 4)
         for method in ("dense", "refined"):
-            hill_mult = st.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m), method=method)
+            hill_mult = floquet.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m), method=method)
             assert max_pair_distance(hill_mult, exact, relative=False) < 1e-4, (harmonics, method, hill_mult, exact)
 
 
@@ -226,10 +228,10 @@ def test_nltv_real_negative_multipliers_at_h32_match_the_variational_monodromy()
     w = rpm_to_rad_s(9000.0)
     sol = solve_periodic(model, w, harmonics=32, samples=256)
     hb = HarmonicBalance(model.ndof, 32, 1, 256)
-    exact = np.linalg.eigvals(st.monodromy_variational(model, sol, w))
+    exact = np.linalg.eigvals(monodromy.monodromy_variational(model, sol, w))
     assert np.sum((np.abs(exact.imag) < 1e-9) & (exact.real < 0)) == 2
     for method in ("dense", "refined"):
-        mult = st.hill_multipliers(hb, sol.z, w, GearSystem(model), method=method)
+        mult = floquet.hill_multipliers(hb, sol.z, w, GearSystem(model), method=method)
         assert max_pair_distance(mult, exact, relative=False) < 1e-2, (method, mult, exact)
         # self-conjugate families (real multipliers) come out real to rounding, not ~1e-6 off the
         # axis, where the "real" test of stability.period_doubling would flicker between points

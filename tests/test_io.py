@@ -1,4 +1,4 @@
-"""hbgear.io: atomic writers leave either the complete new file or nothing (old file intact)."""
+"""hbgear.outputs.io: atomic writers leave either the complete new file or nothing (old file intact)."""
 
 import csv
 import json
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hbgear.errors import ConfigError
-from hbgear.io import (
+from hbgear.outputs.io import (
     prepare_out_dir,
     save_figure_atomic,
     write_csv_atomic,

@@ -1,4 +1,4 @@
-"""Tests for the Benedict–Kelley / Kelley–Lemanski friction coefficient (hbgear.kelley_lemanski)."""
+"""Tests for the Benedict–Kelley / Kelley–Lemanski friction coefficient (hbgear.gear.kelley_lemanski)."""
 
 import math
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hbgear.kelley_lemanski import (
+from hbgear.gear.kelley_lemanski import (
     KELLEY_C3_SI,
     MU_CAP_DEFAULT,
     ROUGHNESS_LIMIT_UM,

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from hbgear.build import build_model
 from hbgear.config import parse_config
-from hbgear.quadrature import fourier_coefficients, mesh_period_rule
+from hbgear.engine.quadrature import fourier_coefficients, mesh_period_rule
 
 jax.config.update("jax_enable_x64", True)
 

@@ -1,4 +1,4 @@
-"""Time integration (hbgear.simulate): energy balance, linear closed form, tolerance, steady state,
+"""Time integration (hbgear.gear.simulate): energy balance, linear closed form, tolerance, steady state,
 fixed-length marching, the reaction boundary against harmonic balance."""
 
 import math
@@ -9,9 +9,9 @@ import pytest
 from hbgear.build import build_model
 from hbgear.config import parse_config
 from hbgear.errors import ConvergenceError
-from hbgear.simulate import _steady_period, march, simulate
-from hbgear.solve import solve_periodic
-from hbgear.stability import multipliers_linear
+from hbgear.gear.simulate import _steady_period, march, simulate
+from hbgear.gear.solve import solve_periodic
+from hbgear.gear.monodromy import multipliers_linear
 
 BASE = {
     "gear": dict(teeth_pinion=25, teeth_gear=31, module_mm=3.175, contact_ratio=1.433,
@@ -101,7 +101,7 @@ def test_simulate_command_writes_outputs(tmp_path):
     import csv
     import json
 
-    import hbgear.commands.simulate  # noqa: F401  (registers the command)
+    import hbgear.cli.simulate  # noqa: F401  (registers the command)
     from hbgear import cli
 
     example = str(__import__("pathlib").Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml")
@@ -214,7 +214,7 @@ def test_simulate_command_march_fixed_cycles(tmp_path):
     import csv
     import json
 
-    import hbgear.commands.simulate  # noqa: F401  (registers the command)
+    import hbgear.cli.simulate  # noqa: F401  (registers the command)
     from hbgear import cli
     from hbgear.build import build_model
     from hbgear.config import load_config

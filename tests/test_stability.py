@@ -1,4 +1,4 @@
-"""hbgear.stability and `hbgear stability-map`: Hill = exact monodromy, parametric tongues,
+"""hbgear.engine.floquet and `hbgear stability-map`: Hill = exact monodromy, parametric tongues,
 distributed = local, resume without recomputation."""
 
 import math
@@ -9,11 +9,15 @@ import pytest
 from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 
-from hbgear import stability as st
+from hbgear.engine import floquet
+
+from hbgear.gear import maps
+
+from hbgear.gear import monodromy
 from hbgear.build import build_model
 from hbgear.config import load_config
-from hbgear.hb import HarmonicBalance
-from hbgear.system import GearSystem
+from hbgear.engine.hb import HarmonicBalance
+from hbgear.gear.system import GearSystem
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
 RPM = 60.0 / (2.0 * np.pi)
@@ -56,12 +60,12 @@ def test_hill_multipliers_equal_exact_monodromy_ltv_a(boundary, where):
     m = model(boundary)
     rpm = tongue_rpm(m, 1) if where == "tongue" else 20000.0
     omega = rpm / RPM
-    exact = st.multipliers_linear(m, omega)
+    exact = monodromy.multipliers_linear(m, omega)
     hb = HarmonicBalance(m.ndof, 32, 1, 132)
-    hill = st.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m))  # linear: J independent of z
+    hill = floquet.hill_multipliers(hb, np.zeros(hb.size), omega, GearSystem(m))  # linear: J independent of z
     assert len(exact) == len(hill) == 2 * m.ndof - (2 if boundary == "reaction" else 0)
     assert max_pair_distance(hill, exact) < 1e-6
-    assert st.is_stable(exact) == (where == "stable")
+    assert floquet.is_stable(exact) == (where == "stable")
 
 
 def test_monodromy_ltv_a_is_product_of_expm_and_rejects_other_models():
@@ -75,48 +79,48 @@ def test_monodromy_ltv_a_is_product_of_expm_and_rejects_other_models():
         c = float(m.mesh_damping_Ns_per_m)
         me = float(m.mass_equivalent_kg)
         phi = expm(np.array([[0, 1], [-k / me, -c / me]]) * (b - a) * tm) @ phi
-    np.testing.assert_allclose(st.monodromy_ltv_a(m, omega), phi, rtol=1e-11, atol=1e-13 * np.abs(phi).max())
+    np.testing.assert_allclose(monodromy.monodromy_ltv_a(m, omega), phi, rtol=1e-11, atol=1e-13 * np.abs(phi).max())
     with pytest.raises(ValueError, match="formulation"):
-        st.monodromy_ltv_a(model("torques", formulation="B"), omega)
+        monodromy.monodromy_ltv_a(model("torques", formulation="B"), omega)
 
 
 def test_expm_batched_matches_scipy():
     rng = np.random.default_rng(0)
     a = rng.normal(size=(50, 4, 4)) * np.logspace(-3, 2, 50)[:, None, None]
     ref = np.stack([expm(x) for x in a])
-    np.testing.assert_allclose(st.expm_batched(a), ref, rtol=1e-11, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(monodromy.expm_batched(a), ref, rtol=1e-11, atol=1e-12 * np.abs(ref).max())
 
 
 def test_formulation_b_magnus_equals_variational_equations():
     m = model("torques", formulation="B")
     omega = 26000.0 / RPM
-    magnus = st.monodromy_linear(m, omega)
-    variational = st.monodromy_variational(m, lambda tau: (np.zeros((1, 1)), np.zeros((1, 1))), omega)
+    magnus = monodromy.monodromy_linear(m, omega)
+    variational = monodromy.monodromy_variational(m, lambda tau: (np.zeros((1, 1)), np.zeros((1, 1))), omega)
     np.testing.assert_allclose(magnus, variational, rtol=1e-7, atol=1e-9 * np.abs(magnus).max())
     # friction as a parameter (B) changes the multipliers, as an excitation (A) it cannot
-    assert max_pair_distance(np.linalg.eigvals(magnus), st.multipliers_linear(model("torques"), omega)) > 1e-4
+    assert max_pair_distance(np.linalg.eigvals(magnus), monodromy.multipliers_linear(model("torques"), omega)) > 1e-4
 
 
 def test_variational_state_synthesis_equals_the_solution_and_a_state_function():
     """The monodromy's own synthesis of ``(q, q')`` (one matrix product per instant) equals
     ``PeriodicSolution.state_at``, and the monodromy is the same whether it gets the solution or
     ``state_at`` as a plain function (NLTV arctan, soft spring, near the 5270 rpm crossing)."""
-    from hbgear.solve import solve_periodic
+    from hbgear.gear.solve import solve_periodic
 
     m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
     omega = 5300.0 / RPM
     sol = solve_periodic(m, omega, harmonics=16, samples=128)
-    synthesis = st._state_synthesis(sol)
+    synthesis = monodromy._state_synthesis(sol)
     tau = np.array([0.0, 0.123, 0.5, 0.987])
     q, qd = sol.state_at(tau)
     for j, t in enumerate(tau):
         qs, qds = synthesis(t)
         np.testing.assert_allclose(qs, q[:, j], rtol=1e-13, atol=1e-13 * np.abs(q).max())
         np.testing.assert_allclose(qds, qd[:, j], rtol=1e-13, atol=1e-13 * np.abs(qd).max())
-    from_solution = st.monodromy_variational(m, sol, omega)
+    from_solution = monodromy.monodromy_variational(m, sol, omega)
     # the same solution through the generic path (a callable; its wind-up from the model)
     assert sol.u_static_m == pytest.approx(float(m.static_windup(omega)), rel=1e-12)
-    from_function = st.monodromy_variational(m, sol.state_at, omega)
+    from_function = monodromy.monodromy_variational(m, sol.state_at, omega)
     np.testing.assert_allclose(from_solution, from_function, rtol=1e-9, atol=1e-11 * np.abs(from_function).max())
 
 
@@ -127,27 +131,27 @@ def test_map_reproduces_parametric_tongues():
     m = model("torques", zeta=0.005)
     centres = [tongue_rpm(m, j) for j in (1, 3)]
     between = [tongue_rpm(m, 1.5), tongue_rpm(m, 2.5), tongue_rpm(m, 3.5)]
-    values = st.stability_map_ltv_a([m], centres + between)[0]
+    values = maps.stability_map_ltv_a([m], centres + between)[0]
     assert np.all(values[:2] > 1.0), values
     assert np.all(values[2:] < 1.0), values
     # j = 2 (even: a fold, multiplier through +1) is narrow; a light damping and a fine scan
     light = model("torques", zeta=0.001)
     scan = np.linspace(0.97, 1.01, 401) * tongue_rpm(light, 2)
-    assert st.stability_map_ltv_a([light], scan)[0].max() > 1.0
+    assert maps.stability_map_ltv_a([light], scan)[0].max() > 1.0
     # types of instability: real multiplier through -1 (odd j), through +1 (even j)
-    odd = st.multipliers_linear(m, centres[0] / RPM)
-    assert st.period_doubling(odd) and st.classify(odd).kind == "period-doubling"
-    worst = scan[np.argmax(st.stability_map_ltv_a([light], scan)[0])]
-    even = st.multipliers_linear(light, worst / RPM)
-    assert not st.period_doubling(even) and st.classify(even).kind == "fold"
+    odd = monodromy.multipliers_linear(m, centres[0] / RPM)
+    assert floquet.period_doubling(odd) and floquet.classify(odd).kind == "period-doubling"
+    worst = scan[np.argmax(maps.stability_map_ltv_a([light], scan)[0])]
+    even = monodromy.multipliers_linear(light, worst / RPM)
+    assert not floquet.period_doubling(even) and floquet.classify(even).kind == "fold"
 
 
 def test_map_holds_tooth_stiffnesses_and_shifts_zone_with_contact_ratio():
     cfg = config('boundary.output="torques"')
-    lo, hi = st.model_at_contact_ratio(cfg, 1.35), st.model_at_contact_ratio(cfg, 1.65)
+    lo, hi = maps.model_at_contact_ratio(cfg, 1.35), maps.model_at_contact_ratio(cfg, 1.65)
     assert lo.k_min_N_per_m == hi.k_min_N_per_m and lo.k_max_N_per_m == hi.k_max_N_per_m
     speeds = np.linspace(20000, 32000, 121)
-    values = st.stability_map_ltv_a(cfg, speeds, [1.35, 1.65])
+    values = maps.stability_map_ltv_a(cfg, speeds, [1.35, 1.65])
     centre = [np.average(speeds, weights=np.clip(v - 1, 0, None)) for v in values]
     assert centre[1] > centre[0] + 500  # k_mean grows with Gamma
 
@@ -168,7 +172,7 @@ def small_config():
 
 def test_dask_path_equals_local_path(small_config, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
-    from hbgear.commands import stability_map as cmd
+    from hbgear.cli import stability_map as cmd
 
     local = cmd.run_map(small_config, tmp_path / "local", progress=False)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
@@ -179,7 +183,7 @@ def test_dask_path_equals_local_path(small_config, tmp_path):
 
 
 def test_resume_skips_finished_rows(small_config, tmp_path, monkeypatch):
-    from hbgear.commands import stability_map as cmd
+    from hbgear.cli import stability_map as cmd
 
     speeds, ratios = cmd.grid(small_config)
     fingerprint = cmd._fingerprint(small_config, speeds, ratios)
@@ -201,7 +205,7 @@ def test_resume_skips_finished_rows(small_config, tmp_path, monkeypatch):
     assert calls == [ratios[1]]
     np.testing.assert_array_equal(values[0], finished[0])
     np.testing.assert_array_equal(values[2], finished[2])
-    np.testing.assert_allclose(values[1], st.stability_row(small_config, ratios[1], speeds))
+    np.testing.assert_allclose(values[1], maps.stability_row(small_config, ratios[1], speeds))
     assert not (tmp_path / cmd.PARTIAL).exists()
     lines = (tmp_path / "stability.csv").read_text().splitlines()
     assert lines[0] == "speed_rpm,contact_ratio,max_abs_floquet" and len(lines) == 1 + 18
@@ -217,7 +221,7 @@ def test_cli_writes_outputs_and_missing_dask_is_bad_input(tmp_path, monkeypatch,
     import sys
 
     from hbgear import cli
-    from hbgear.commands import stability_map  # noqa: F401  (registers the command)
+    from hbgear.cli import stability_map  # noqa: F401  (registers the command)
 
     args = ["stability-map", str(EXAMPLE), "--out", str(tmp_path / "o"), "--no-progress"]
     args += ["--set", "map.speed_steps=5", "--set", "map.contact_ratio_steps=2"]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hbgear.bifurcation import backlash_frc, jump_speeds
+from hbgear.gear.bifurcation import backlash_frc, jump_speeds
 from hbgear.build import build_model
 from hbgear.config import load_config
 

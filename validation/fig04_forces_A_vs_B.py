@@ -13,7 +13,7 @@ import numpy as np
 
 from hbgear.build import build_model
 from hbgear.config import parse_config
-from hbgear.simulate import simulate
+from hbgear.gear.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "out"
 BASE = {
@@ -74,7 +74,7 @@ def plot_and_note(results, out=OUT):
     note = f"""# Fig. 4 -- mesh and friction forces per pair, formulation A vs B
 
 Case: Gamma = 1.532, mu0 = 0.1 (Coulomb, nominal sliding: LTV), zeta = 0.01, {a.speed_rpm:.0f} rpm,
-soft-spring output, time integration (hbgear.simulate) to steady state.
+soft-spring output, time integration (hbgear.gear.simulate) to steady state.
 
 | formulation | DTE rms [um] | DTE p2p [um] | dynamic factor | friction force range [N] | friction loss [W] | cycles |
 |---|---|---|---|---|---|---|

@@ -14,7 +14,7 @@ import numpy as np
 
 from hbgear.build import build_model
 from hbgear.config import parse_config
-from hbgear.simulate import simulate
+from hbgear.gear.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "out"
 BASE = {
@@ -84,8 +84,8 @@ def plot_and_note(results, out=OUT):
     note = f"""# Fig. 7 -- net input power, constant torques vs soft output spring
 
 Reference pair (Table 1 completed, Gamma 1.433), LTV, Coulomb mu0 = 0.1, formulation A, zeta 0.01,
-boundary damping ratio 0 (the soft mode is deflated by the integrator, see hbgear.simulate).
-Means are quadrature means over one steady period (hbgear.metrics.periodic_summary).
+boundary damping ratio 0 (the soft mode is deflated by the integrator, see hbgear.gear.simulate).
+Means are quadrature means over one steady period (hbgear.gear.readouts.periodic_summary).
 
 | boundary | speed [rpm] | mean net power (loss) [W] | friction loss [W] | mesh power <F delta'> [W] | loss - friction - mesh [W] |
 |---|---|---|---|---|---|

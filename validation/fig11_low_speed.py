@@ -13,7 +13,7 @@ import numpy as np
 
 from hbgear.build import build_model
 from hbgear.config import parse_config
-from hbgear.simulate import simulate
+from hbgear.gear.simulate import simulate
 
 OUT = Path(__file__).resolve().parent / "out"
 BASE = {

@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hbgear import stability as st
+from hbgear.gear import monodromy
 from hbgear.build import build_model
 from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
-from hbgear.simulate import march
-from hbgear.solve import rad_s_to_rpm, rpm_to_rad_s, solve_periodic
+from hbgear.gear.simulate import march
+from hbgear.gear.solve import rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -50,7 +50,7 @@ def models(formulation: str = "A"):
 def unstable_zones(model, rpm_lo=1440.0, rpm_hi=1520.0, steps=1601):
     """``[(start_rpm, stop_rpm, max |multiplier|, sign of the leading multiplier, rpm of the max)]``."""
     speeds = np.linspace(rpm_lo, rpm_hi, steps)
-    mult = st.multipliers_linear(model, rpm_to_rad_s(speeds))
+    mult = monodromy.multipliers_linear(model, rpm_to_rad_s(speeds))
     mod = np.max(np.abs(mult), axis=-1)
     bad = mod > 1.0 + 1e-9
     zones, i = [], 0
@@ -71,7 +71,7 @@ def unstable_zones(model, rpm_lo=1440.0, rpm_hi=1520.0, steps=1601):
 def run_fixed(model, omega, cycles, *, samples_per_cycle=64):
     """DTE over up to `cycles` mesh periods from the quasi-static state, with no steady-state test.
 
-    :func:`hbgear.simulate.march` (the integration of :func:`hbgear.simulate.simulate`, whole
+    :func:`hbgear.gear.simulate.march` (the integration of :func:`hbgear.gear.simulate.simulate`, whole
     record kept, soft mode not deflated, so a growing or slowly settling response shows as it
     is), stopped once ``|delta| > BLOWUP_M``. Returns ``(delta [m], shape (cycles, samples),
     Poincare states at phase 0, shape (cycles, 2 ndof), per-cycle p2p [um], per-cycle RMS [um])``.
@@ -85,11 +85,11 @@ def nltv_scan(ltv, nltv, rpms, harmonics):
     rows, z = [], None
     for rpm in rpms:
         omega = rpm_to_rad_s(float(rpm))
-        m_ltv = float(np.max(np.abs(st.multipliers_linear(ltv, omega))))
+        m_ltv = float(np.max(np.abs(monodromy.multipliers_linear(ltv, omega))))
         try:
             sol = solve_periodic(nltv, omega, harmonics=harmonics, samples=8 * harmonics, z0=z)
             z = sol.z
-            m = st.floquet_multipliers(nltv, omega, solution=sol, method="variational")
+            m = monodromy.floquet_multipliers(nltv, omega, solution=sol, method="variational")
             rows.append((float(rpm), m_ltv, sol, complex(m[np.argmax(np.abs(m))]), ""))
         except ConvergenceError as exc:
             z = None

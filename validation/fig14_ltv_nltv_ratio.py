@@ -10,7 +10,7 @@ previous run), k_max and k_min held as Gamma varies. Two ways:
 - periodic solutions: both models by harmonic balance (nu = 1) on a coarse grid, the NLTV
   solution continued along speed; where the LTV model is unstable (exact monodromy) its steady
   response is never reached and the ratio is marked infinite;
-- the paper's way: both models by time integration (:func:`hbgear.simulate.march`) from the
+- the paper's way: both models by time integration (:func:`hbgear.gear.simulate.march`) from the
   static state (delta' = 0) for the same fixed number of mesh cycles, gamma = p2p DTE of the
   last cycle, LTV over NLTV, on a finer grid across the primary zone (w_m ~ 2 w_n), for
   formulations A and B; two worker processes, ~4 minutes.
@@ -26,11 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hbgear import stability as st
+from hbgear.gear import maps as gear_maps
+
+from hbgear.gear import monodromy
 from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
-from hbgear.simulate import march
-from hbgear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.simulate import march
+from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -58,7 +60,7 @@ def _ti_point(task):
     omega = rpm_to_rad_s(float(rpm))
     out = []
     for cfg in _configs(zeta, formulation):
-        model = st.model_at_contact_ratio(cfg, gamma)
+        model = gear_maps.model_at_contact_ratio(cfg, gamma)
         rec = march(model, omega, cycles, samples_per_cycle=64, rtol=TI_RTOL, max_abs_dte_m=TI_BLOWUP_M)
         out.append(rec.dte_p2p_um)
     return out
@@ -108,7 +110,7 @@ def ti_ratio_map(speeds_rpm, ratios, formulations=("A", "B"), *, cycles: int = T
         m["kind"] = np.full(shape, "", dtype=object)
         ltv_cfg, _ = _configs(zeta, f)
         for i, g in enumerate(ratios):
-            m["mult"][i] = np.max(np.abs(st.multipliers_linear(st.model_at_contact_ratio(ltv_cfg, g),
+            m["mult"][i] = np.max(np.abs(monodromy.multipliers_linear(gear_maps.model_at_contact_ratio(ltv_cfg, g),
                                                                rpm_to_rad_s(np.asarray(speeds_rpm, float)))), axis=-1)
             for j in range(len(speeds_rpm)):
                 p_l, p_n = next(it)
@@ -129,10 +131,10 @@ def ratio_map(speeds_rpm, ratios, *, harmonics: int = 32, samples: int = 256, ze
     shape = (len(ratios), len(speeds_rpm))
     p_ltv, p_nl, mult = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     for i, gamma in enumerate(ratios):
-        ltv = st.model_at_contact_ratio(cfg_ltv, gamma)
-        nltv = st.model_at_contact_ratio(cfg_nltv, gamma)
+        ltv = gear_maps.model_at_contact_ratio(cfg_ltv, gamma)
+        nltv = gear_maps.model_at_contact_ratio(cfg_nltv, gamma)
         omegas = rpm_to_rad_s(np.asarray(speeds_rpm, float))
-        mult[i] = np.max(np.abs(st.multipliers_linear(ltv, omegas)), axis=-1)
+        mult[i] = np.max(np.abs(monodromy.multipliers_linear(ltv, omegas)), axis=-1)
         z = None
         for j, omega in enumerate(omegas):
             p_ltv[i, j] = solve_periodic(ltv, float(omega), harmonics=harmonics, samples=samples).summary()["dte_p2p_um"]
@@ -352,7 +354,7 @@ def _ti_text(ti, speeds, ratios, cycles, zeta, elapsed) -> str:
     return f"""## Time integrations of fixed length (the paper's procedure)
 
 Both models from the static state (delta' = 0) for {cycles} mesh cycles, gamma = p2p DTE of the
-last cycle, LTV over NLTV (:func:`hbgear.simulate.march`, LSODA, rtol = {TI_RTOL:g}, 64 samples
+last cycle, LTV over NLTV (:func:`hbgear.gear.simulate.march`, LSODA, rtol = {TI_RTOL:g}, 64 samples
 per cycle plus the quadrature nodes); a run stops once |delta| > {1e3 * TI_BLOWUP_M:.0f} mm (diverged).
 Grid {len(speeds)} speeds ({speeds[0]:.0f}-{speeds[-1]:.0f} rpm, step {speeds[1] - speeds[0]:.0f}) x contact
 ratios {', '.join(f'{g:.2f}' for g in ratios)}, across the primary zone (w_m ~ 2 w_n, the zone of

@@ -113,7 +113,7 @@ def _plt():
 
 def save(fig, name: str) -> str:
     """Save `fig` as ``validation/figures/<name>.png`` atomically; returns the report-relative path."""
-    from hbgear.io import save_figure_atomic
+    from hbgear.outputs.io import save_figure_atomic
 
     FIGURES.mkdir(parents=True, exist_ok=True)
     save_figure_atomic(fig, FIGURES / f"{name}.png", dpi=110)
@@ -179,8 +179,8 @@ def md_table(header, rows) -> str:
 
 
 def _hb_vs_ti(cases, name, title):
-    from hbgear.simulate import simulate
-    from hbgear.solve import auto_harmonics, solve_periodic
+    from hbgear.gear.simulate import simulate
+    from hbgear.gear.solve import auto_harmonics, solve_periodic
 
     plt = _plt()
     rows, table, results = [], [], []
@@ -231,7 +231,7 @@ def check_hb_vs_ti():
     rows, fig, table = _hb_vs_ti(cases, "hb_vs_ti", "HB vs TI: reference pair, spring boundary (zeta_b 0.1), zeta 0.01")
     note = f"""Reference pair (examples/paper_table1.toml), soft output spring with `boundary.damping_ratio = 0.1`,
 mesh damping ratio 0.01, Coulomb mu0 = 0.1 (LTV) or the arctan law with v0 = 0.01 m/s (NLTV). HB with
-H = 32 and N = 256 AFT samples; TI by `hbgear.simulate` (LSODA, rtol 1e-9) to a periodic steady state.
+H = 32 and N = 256 AFT samples; TI by `hbgear.gear.simulate` (LSODA, rtol 1e-9) to a periodic steady state.
 
 {table}
 
@@ -263,7 +263,7 @@ so HB needs hundreds of harmonics; it still matches TI. This is the regime of th
 
 @check("hb_convergence", "HB convergence with the number of harmonics H", 150)
 def check_convergence():
-    from hbgear.solve import solve_periodic
+    from hbgear.gear.solve import solve_periodic
 
     plt = _plt()
     hs, href, samples, rpm = (4, 8, 16, 32, 64), 128, 4096, 3000.0
@@ -322,8 +322,8 @@ study."""
 
 @check("energy_balance", "Energy balance: loss = friction loss + mesh power, every coupling", 60)
 def check_energy():
-    from hbgear.simulate import simulate
-    from hbgear.solve import solve_periodic
+    from hbgear.gear.simulate import simulate
+    from hbgear.gear.solve import solve_periodic
 
     plt = _plt()
     rpm = 3000.0
@@ -370,7 +370,7 @@ the default N = {DEFAULT_SAMPLES} AFT samples, TI with rtol 1e-9. MODEL.md secti
   O(1/N^2) of a continuous sampled function (table). Before the correction the jumps aliased at
   O(1/N): 8e-5 (A) and 1.6e-4 (B) at N = 4096.
 - TI balances to ~1e-8 for every coupling. For LTI the excitation c d_st' has impulses at the
-  stiffness jumps (velocity kicks in `hbgear.simulate`); their work J (v- + v+)/2 is part of the
+  stiffness jumps (velocity kicks in `hbgear.gear.simulate`); their work J (v- + v+)/2 is part of the
   mesh power read-out.
 - Paper (Fig. 7 text): with the soft spring the mean input power is the friction loss, 629 W in its
   case; here ~957 W at 3000 rpm (~629 W near 1970 rpm, see Fig. 7 below). The mesh power is
@@ -383,10 +383,11 @@ the default N = {DEFAULT_SAMPLES} AFT samples, TI with rtol 1e-9. MODEL.md secti
 
 @check("hill_vs_monodromy", "Floquet multipliers: Hill's method vs exact monodromy (LTV-A, LTV-B)", 30)
 def check_hill():
-    from hbgear import stability as st
-    from hbgear.hb import HarmonicBalance
-    from hbgear.solve import solve_periodic
-    from hbgear.system import GearSystem
+    from hbgear.engine import floquet
+    from hbgear.gear import monodromy
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.solve import solve_periodic
+    from hbgear.gear.system import GearSystem
 
     plt = _plt()
     speeds = (7000.0, 13400.0, 20000.0, 26800.0)
@@ -400,15 +401,15 @@ def check_hill():
         for i, rpm in enumerate(speeds):
             sol = solve_periodic(model, rad(rpm), harmonics=64)
             hb = HarmonicBalance(model.ndof, sol.harmonics, sol.nu, sol.samples)
-            hill = st.hill_multipliers(hb, sol.z, rad(rpm), GearSystem(model))
-            exact = st.multipliers_linear(model, rad(rpm))
+            hill = floquet.hill_multipliers(hb, sol.z, rad(rpm), GearSystem(model))
+            exact = monodromy.multipliers_linear(model, rad(rpm))
             dist = float(np.max(np.min(np.abs(exact[:, None] - hill[None, :]), axis=1)))
             worst = max(worst, dist)
-            agree = st.is_stable(hill) == st.is_stable(exact)
+            agree = floquet.is_stable(hill) == floquet.is_stable(exact)
             rows.append(row(f"LTV-{form} {rpm:g} rpm: stability verdict Hill = monodromy", float(agree), 1.0, relation=">=",
                             fmt=".0f"))
             table.append([f"LTV-{form}", f"{rpm:g}", " ".join(f"{m:.6f}" for m in exact), f"{dist:.1e}",
-                          f"{np.max(np.abs(exact)):.5f}", "stable" if st.is_stable(exact) else "unstable"])
+                          f"{np.max(np.abs(exact)):.5f}", "stable" if floquet.is_stable(exact) else "unstable"])
             ax.plot(exact.real, exact.imag, "o", mfc="none", ms=9, color=f"C{i}", label=f"{rpm:g} rpm monodromy")
             ax.plot(hill.real, hill.imag, "x", ms=7, color=f"C{i}", label=f"{rpm:g} rpm Hill")
         rows.append(row(f"LTV-{form}: max |Hill - monodromy| (H=64), 4 speeds", worst, 1e-5, fmt=".2g"))
@@ -444,8 +445,8 @@ def _friction_total(model, omega, q, qd, s):
 
 @check("fig05_friction_spectra", "Fig. 5: spectra of the total friction force, formulation A vs B", 60)
 def check_fig05():
-    from hbgear.simulate import simulate
-    from hbgear.solve import solve_periodic
+    from hbgear.gear.simulate import simulate
+    from hbgear.gear.solve import solve_periodic
 
     plt = _plt()
     base = ["gear.contact_ratio=1.532", "mesh.damping_ratio=0.01", "friction.model='LTV'", *SPRING]
@@ -525,8 +526,8 @@ values we can read from the text extraction, so only the shape is compared."""
 
 @check("fig06_semidefinite_vs_spring", "Fig. 6: semi-definite (torques) vs soft-spring output, 2000 rpm", 40)
 def check_fig06():
-    from hbgear.simulate import simulate
-    from hbgear.solve import solve_periodic
+    from hbgear.gear.simulate import simulate
+    from hbgear.gear.solve import solve_periodic
 
     plt = _plt()
     rpm = 2000.0
@@ -572,7 +573,7 @@ Agrees with the paper: the two systems give the same DTE in the frequency range 
 an extra low-frequency component with the spring; that is the soft mode's free oscillation (period
 ~0.26 s, ~200 mesh cycles here), which never decays in an undamped time integration. A periodic
 steady state has no such component: HB solves for the periodic response directly, and
-`hbgear.simulate` removes the soft mode's free oscillation (MODEL.md section 4, modelling notes), so
+`hbgear.gear.simulate` removes the soft mode's free oscillation (MODEL.md section 4, modelling notes), so
 neither shows it. The residual difference between the two boundaries is the soft spring's
 coupling, O(1/5e5) in stiffness plus the small mesh-rate motion u of the gear body."""
     return {"rows": rows, "figures": [save(fig, "fig06_semidefinite_vs_spring")], "note": note}
@@ -621,11 +622,11 @@ def check_duffing():
     try:
         import jax.numpy as jnp
 
-        from hbgear.continuation import PseudoArclength, continuation
-        from hbgear.hb import HarmonicBalance
-        from hbgear.system import Duffing
+        from hbgear.engine.continuation import PseudoArclength, continuation
+        from hbgear.engine.hb import HarmonicBalance
+        from hbgear.engine.system import Duffing
     except ImportError as exc:  # the continuation module is being written elsewhere
-        return not_run(f"hbgear.continuation is not importable ({exc}). TODO: rerun with `--only duffing_frc`.")
+        return not_run(f"hbgear.engine.continuation is not importable ({exc}). TODO: rerun with `--only duffing_frc`.")
     from scipy.optimize import brentq
 
     plt = _plt()
@@ -672,7 +673,7 @@ def check_duffing():
     shift7 = [rel(x, e) for x, e in zip(np.sort(b7.fold_p), jumps)]
     # time integration: slow sweeps up and down; HB (H=7) Newton-solved at the same frequencies from
     # the TI state, so each TI point is compared with the HB solution on the branch it landed on
-    from hbgear.newton import newton
+    from hbgear.engine.newton import newton
 
     up = np.linspace(0.9, 1.5, 9)
     down = up[::-1]
@@ -716,7 +717,7 @@ def check_duffing():
     ax.set_title("x'' + 0.02 x' + x + 0.1 x^3 = 0.05 cos wt", fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     header = ["HB", "points", "rejected steps", "folds w (lower / upper)", "peak w", "peak amplitude", "max |R|"]
-    note = f"""`hbgear.continuation` (pseudo-arclength, PseudoArclength() defaults) on `hbgear.system.Duffing` with H = 1
+    note = f"""`hbgear.engine.continuation` (pseudo-arclength, PseudoArclength() defaults) on `hbgear.engine.system.Duffing` with H = 1
 (N = 16) and H = 7 (N = 64) from w = 0.5 to 2. Analytic: the single-harmonic amplitude relation
 ((k - w^2 + 3/4 a A^2)^2 + (c w)^2) A^2 = f^2, whose jump frequencies are where the cubic in A^2 has a
 double root: w = {jumps[0]:.6f} and {jumps[1]:.6f}. TI: `scipy` DOP853 over 200 forcing periods per frequency in
@@ -835,7 +836,11 @@ def check_fig11():
 def check_fig13():
     import importlib
 
-    from hbgear import stability as st
+    from hbgear.engine import floquet
+
+    from hbgear.gear import maps as gear_maps
+
+    from hbgear.gear import monodromy
     from hbgear.config import load_config
 
     mod = importlib.import_module("validation.fig13_stability_map")
@@ -850,7 +855,7 @@ def check_fig13():
                          ("A1", ("friction.formulation='A'", "friction.mu0=0.1")),
                          ("B1", ("friction.formulation='B'", "friction.mu0=0.1"))):
         cfg = load_config(EXAMPLE, ["boundary.output='torques'", "friction.model='LTV'", *extra])
-        maps[label] = st.stability_map(cfg, speeds, [1.433])[0]
+        maps[label] = gear_maps.stability_map(cfg, speeds, [1.433])[0]
     ea, eb = mod.zone_edges(speeds, maps["A0"]), mod.zone_edges(speeds, maps["B1"])
     m0 = model_of("boundary.output='torques'")
     primary = 2 * math.sqrt(m0.k_mean_N_per_m / m0.mass_equivalent_kg) / m0.teeth_pinion * 30 / math.pi
@@ -971,7 +976,7 @@ def _status(record) -> str:
 def run_check(chk: Check) -> dict:
     import warnings
 
-    from hbgear.io import write_json_atomic
+    from hbgear.outputs.io import write_json_atomic
 
     t0 = time.perf_counter()
     try:
@@ -1009,7 +1014,7 @@ def _cell(text: str) -> str:
 
 
 def write_report(records: list[dict], wall_s: float) -> Path:
-    from hbgear.io import write_text_atomic
+    from hbgear.outputs.io import write_text_atomic
 
     mark = {True: "PASS", False: "**FAIL**", None: "info"}
     n_pass = sum(r["status"] == "pass" for r in records)

@@ -2,7 +2,7 @@
 
 The pinion speed runs over ``[sweep] speed_rpm_start -> speed_rpm_stop`` (either may be the
 larger) with the model and ``[solver]`` settings of the config; folds are followed and located.
-Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
+Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.outputs.io`:
 
 - `frc.csv`: ``speed_rpm, mesh_freq_hz, dte_mean_um, dte_rms_um, dte_p2p_um, dynamic_factor,
   max_abs_floquet, stable, nu, residual`` -- one row per continuation point in path order (a fold
@@ -20,16 +20,16 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 - `frc.png`: DTE RMS and peak-to-peak against speed, unstable points and folds marked, the
   ``nu = 2`` branches in green, the period doublings as squares.
 
-``harmonics = "auto"``: :func:`hbgear.solve.auto_harmonics` at both ends of the sweep, the larger
+``harmonics = "auto"``: :func:`hbgear.gear.solve.auto_harmonics` at both ends of the sweep, the larger
 ``H`` is used for the whole curve. Stability: exact monodromy for linear models (batched), and
 for backlash models (otherwise linear) at the points where the teeth never separate (the
 linearisation is exactly the linear model's there); Hill's method per point otherwise, classified
-by :func:`hbgear.stability.is_stable`; if that module is missing, the Floquet columns are NaN and
+by :func:`hbgear.engine.floquet.is_stable`; if that module is missing, the Floquet columns are NaN and
 `frc.json` says so. If the continuation stops before the stop speed, the curve computed so
 far is still written (with the status in `frc.json`) and the run ends with exit status 1.
 
 Period doubling (MODEL.md section 6): on a ``nu = 1`` curve, every pair of consecutive points
-between which a real multiplier crosses -1 (:func:`hbgear.stability.period_doubling` changes) is
+between which a real multiplier crosses -1 (:func:`hbgear.engine.floquet.period_doubling` changes) is
 refined on that segment (exact / variational monodromy, :func:`_locate_on_segment`; a crossing
 the exact multipliers do not confirm is listed as ``"not confirmed"``), and the ``nu = 2`` branch
 born there is followed (:func:`follow_period_doubling`, ``H2 = 2 H``, twice the AFT samples)
@@ -42,7 +42,6 @@ in frc.json and a warning on stderr; the ``nu = 1`` curve is kept and the exit s
 
 from __future__ import annotations
 
-import functools
 import math
 import sys
 import time
@@ -52,16 +51,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..build import build_model
-from ..cli import Command, register
-from ..continuation import PseudoArclength, Status, continuation, illinois
+from . import Command, register
+from ..engine.continuation import PseudoArclength, Status, continuation, illinois, sweep_method
+from ..engine.hb import residual_functions
 from ..errors import ConvergenceError
-from ..hb import HarmonicBalance
-from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
-from ..solve import (PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, rpm_to_rad_s, solve_periodic,
+from ..engine.hb import HarmonicBalance
+from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
+from ..gear.solve import (PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, rpm_to_rad_s, solve_periodic,
                      start_guess)
-from ..system import GearSystem
+from ..gear.system import GearSystem
 
-__all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "frc_method", "gear_residual_functions", "plot_frc",
+__all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "plot_frc",
            "PD_AUTO_MAX_UNKNOWNS", "period_doubling_enabled", "follow_period_doubling"]
 
 COLUMNS = (
@@ -105,52 +105,9 @@ def add_arguments(parser) -> None:
                     help="follow the nu = 2 branches even where the default cost rule would skip them")
 
 
-def gear_residual_functions(hb: HarmonicBalance, system):
-    """``(residual_and_jacobians, residual, args)`` in the form
-    :func:`~hbgear.continuation.continuation` takes: ``continuation(rj, r, ..., args=args)``.
-
-    The two functions take ``(z, p, system, quadrature)`` and are the same objects for every
-    system solved with `hb`; ``args = (system, its quadrature)``. The model's parameters are
-    thus arguments of the compiled corrector, not constants in it: a new gear pair with the
-    same structure (``H``, ``N``, laws, boundary) reuses the compiled program, in this process
-    and from the disk cache.
-    """
-    return (*_functions_of(hb), (system, hb.quadrature(system)))
-
-
-@functools.lru_cache(maxsize=16)
-def _functions_of(hb: HarmonicBalance):
-    def residual_and_jacobians(z, p, system, quadrature):
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system, quadrature)
-
-    def residual(z, p, system, quadrature):
-        return hb.residual(jnp.asarray(z), p, system, quadrature)
-
-    return residual_and_jacobians, residual
-
-
-def frc_method(omega_start, omega_stop, step_rad_s=None) -> PseudoArclength:
-    """Continuation options for a speed sweep.
-
-    ``p_ref`` = the larger end speed; the unknowns are in static deflections, so a step moves
-    the DTE harmonics by at most 0.25 static deflection (``ds_max``) and the speed by at most
-    1/100 of the range (``max_parameter_step``; at least ~100 points on a flat curve); tangents
-    turn by at most 5 deg per step. First step: `step_rad_s` (``[sweep] step_rpm``) or 1/4 of
-    the largest speed step.
-    """
-    scale = max(abs(omega_start), abs(omega_stop))
-    dp_max = abs(omega_stop - omega_start) / scale / 100
-    ds = dp_max / 4 if step_rad_s is None else step_rad_s / scale
-    dp_max = max(dp_max, ds)
-    return PseudoArclength(
-        ds=ds, ds_min=min(1e-7, ds / 10), ds_max=max(0.25, ds), max_angle_deg=5.0,
-        parameter_scale=scale, max_parameter_step=dp_max, jit_step=True, chord=True,
-    )
-
-
 def _harmonics(config, model, omega_start, omega_stop, nu):
     """``(H, samples, start solution or None, description)``: with ``H`` from the config no
-    solution is computed here (the continuation corrects :func:`~hbgear.solve.start_guess`)."""
+    solution is computed here (the continuation corrects :func:`~hbgear.gear.solve.start_guess`)."""
     so = config.solver
     if so.harmonics is not None:
         samples = so.time_samples + so.time_samples % nu
@@ -162,7 +119,7 @@ def _harmonics(config, model, omega_start, omega_stop, nu):
     samples += samples % nu
     start = solve_periodic(model, omega_start, harmonics=harmonics, nu=nu, samples=samples,
                            tolerance=so.tolerance, max_iterations=so.max_iterations)
-    text = (f"auto: hbgear.solve.auto_harmonics gave H = {at_start.harmonics} at the start speed and "
+    text = (f"auto: hbgear.gear.solve.auto_harmonics gave H = {at_start.harmonics} at the start speed and "
             f"{at_stop.harmonics} at the stop speed; the larger is used")
     return harmonics, samples, start, text
 
@@ -200,7 +157,7 @@ def _keeps_contact(model, hb, z, p) -> bool:
     return bool(np.min(np.abs(x)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(x)) + 1e-15)
 
 
-#: Points per call of :func:`hbgear.stability.hill_multipliers_batch` (one vmapped Hill-matrix
+#: Points per call of :func:`hbgear.engine.floquet.hill_multipliers_batch` (one vmapped Hill-matrix
 #: evaluation and one stacked eigen-decomposition for small problems; the progress bar steps
 #: by this much).
 HILL_BATCH = 32
@@ -212,7 +169,7 @@ def _hill_in_batches(hb, system, p, z, indices, out, progress, label):
     A batch that fails is redone point by point, so one bad point costs only itself (NaN).
     **Returns:** the failure messages.
     """
-    from ..stability import hill_multipliers, hill_multipliers_batch
+    from ..engine.floquet import hill_multipliers, hill_multipliers_batch
 
     p, z = np.asarray(p, dtype=float), np.asarray(z, dtype=float)
     failures = []
@@ -245,16 +202,16 @@ def _hill_in_batches(hb, system, p, z, indices, out, progress, label):
 def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
     """Floquet multipliers over the base period (``hb.nu`` mesh periods) at every point ``(p[i], z[i])``.
 
-    Exact monodromy (:func:`hbgear.stability.multipliers_linear` per mesh period, batched, raised
+    Exact monodromy (:func:`hbgear.gear.monodromy.multipliers_linear` per mesh period, batched, raised
     to ``nu``) for linear models and, for models whose only non-linearity is the backlash, at the
     points that keep contact (:func:`_linear_equivalent`); Hill's method
-    (:func:`hbgear.stability.hill_multipliers_batch`, in batches) at the others.
+    (:func:`hbgear.engine.floquet.hill_multipliers_batch`, in batches) at the others.
 
     **Returns:** ``(multipliers, method, warning)``: a list of arrays (``None`` where it failed),
     the method text and a warning (or ``None``).
-    **Raises:** `ImportError` if :mod:`hbgear.stability` is unavailable.
+    **Raises:** `ImportError` if :mod:`hbgear.engine.floquet` is unavailable.
     """
-    from ..stability import multipliers_linear
+    from ..gear.monodromy import multipliers_linear
 
     model = system.model
     n = len(p)
@@ -280,8 +237,8 @@ def _multipliers(hb, system, p, z, progress=None, label="Floquet multipliers"):
             hill_idx = sorted(hill_idx + exact_idx)
             exact_idx = []
     failures = _hill_in_batches(hb, system, p, z, hill_idx, out, progress, label)
-    exact_text = "exact monodromy (hbgear.stability.multipliers_linear)"
-    hill_text = "Hill's method (hbgear.stability.hill_multipliers_batch)"
+    exact_text = "exact monodromy (hbgear.gear.monodromy.multipliers_linear)"
+    hill_text = "Hill's method (hbgear.engine.floquet.hill_multipliers_batch)"
     if not hill_idx:
         method = exact_text
     elif not exact_idx:
@@ -309,7 +266,7 @@ def _leaves_through(multiplier) -> str:
 
 def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> list[dict]:
     """Speed intervals where a linear model's steady state is unstable, by exact monodromy on a grid
-    `subdivisions` times finer than the curve's points (:func:`hbgear.stability.multipliers_linear`).
+    `subdivisions` times finer than the curve's points (:func:`hbgear.gear.monodromy.multipliers_linear`).
 
     A zone narrower than a curve step can lie between two stable points of the curve; this scan
     finds it to the grid's resolution. Each zone: ``speed_rpm_from``, ``speed_rpm_to`` (first and
@@ -318,7 +275,8 @@ def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIO
     ``resolution_rpm`` (the grid step at the zone) and
     ``between_curve_points`` (no point of the curve itself falls inside).
     """
-    from ..stability import is_stable, multipliers_linear
+    from ..engine.floquet import is_stable
+    from ..gear.monodromy import multipliers_linear
 
     p = np.sort(np.asarray(speeds_rad_s, dtype=float))
     frac = np.arange(subdivisions) / subdivisions
@@ -354,10 +312,10 @@ def _floquet(hb, system, branch, progress):
     values = np.full(len(branch), np.nan)
     stable = np.full(len(branch), np.nan)
     try:
-        from ..stability import is_stable
+        from ..engine.floquet import is_stable
         multipliers, method, warning = _multipliers(hb, system, np.asarray(branch.p), np.asarray(branch.z), progress)
     except ImportError as exc:  # not there yet: NaN columns and a warning
-        return values, stable, None, f"Floquet multipliers not computed: hbgear.stability unavailable ({exc})", \
+        return values, stable, None, f"Floquet multipliers not computed: hbgear.engine.floquet unavailable ({exc})", \
             [None] * len(branch)
     for i, m in enumerate(multipliers):
         if m is not None:
@@ -414,9 +372,9 @@ def period_doubling_enabled(config, args, model, harmonics, nu) -> tuple[bool, b
 
 
 def _pd_flags(multipliers) -> np.ndarray:
-    """Per point: 1.0 if a real multiplier lies below -1 (:func:`hbgear.stability.period_doubling`), 0.0 if
+    """Per point: 1.0 if a real multiplier lies below -1 (:func:`hbgear.engine.floquet.period_doubling`), 0.0 if
     not, NaN if unknown."""
-    from ..stability import period_doubling
+    from ..engine.floquet import period_doubling
 
     return np.array([np.nan if m is None else float(period_doubling(m)) for m in multipliers])
 
@@ -424,7 +382,7 @@ def _pd_flags(multipliers) -> np.ndarray:
 def _pd_multiplier(model, hb, sol) -> float:
     """Most negative real multiplier per mesh period of the ``nu = 1`` solution `sol`: exact
     monodromy where :func:`_linear_equivalent` applies, the variational equations otherwise."""
-    from ..bifurcation import period_doubling_multiplier
+    from ..gear.bifurcation import period_doubling_multiplier
 
     linear = _linear_equivalent(model)
     if linear is not None and (linear is model or _keeps_contact(model, hb, sol.z, sol.omega_pinion)):
@@ -446,10 +404,10 @@ def _locate_on_segment(model, hb, branch, i, harmonics, samples, tolerance, max_
     H = 32, N = 1024 on the NLTV pair; 4e-5 at N = 256). Without that bracket the whole segment
     is searched with the exact multipliers.
 
-    **Returns:** :class:`hbgear.bifurcation.PeriodDoublingPoint`, or ``None`` with the reason if the
+    **Returns:** :class:`hbgear.gear.bifurcation.PeriodDoublingPoint`, or ``None`` with the reason if the
     exact multipliers do not confirm the crossing.
     """
-    from ..bifurcation import PeriodDoublingPoint
+    from ..gear.bifurcation import PeriodDoublingPoint
 
     pa, pb = float(branch.p[i]), float(branch.p[i + 1])
     za, zb = np.asarray(branch.z[i]), np.asarray(branch.z[i + 1])
@@ -514,7 +472,7 @@ def _hill_crossing(model, hb, solve, pa, pb, tolerance, max_steps):
     """``(w, slope)``: the -1 crossing of Hill's most negative real multiplier between `pa` and
     `pb` (to `tolerance` relative) and the slope of its ``mu + 1`` over the segment, or ``None``
     when Hill's multipliers do not bracket a crossing there (or fail)."""
-    from ..stability import hill_multipliers, most_negative_real
+    from ..engine.floquet import hill_multipliers, most_negative_real
 
     system = GearSystem(model)
 
@@ -536,7 +494,7 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
                            max_points=400, amplitude=0.02, max_amplitude=100.0, progress=None):
     r"""Follow the ``nu = 2`` branch born at `point` while it stays in ``[omega_lo, omega_hi]``.
 
-    As :func:`hbgear.bifurcation.continue_period_doubled`: continuation in the half-order amplitude
+    As :func:`hbgear.gear.bifurcation.continue_period_doubled`: continuation in the half-order amplitude
     ``a = phi . (z - z_*)`` with the speed as an unknown (regular at the bifurcation whether the
     branch is vertical, super- or subcritical), from `amplitude` up to `max_amplitude` static
     deflections. It ends
@@ -550,7 +508,7 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
 
     **Returns:** ``(omega (n,), z (n, size), residual (n,), hb2, status, message)``.
     """
-    from ..bifurcation import amplitude_residuals, embed_subharmonic, half_order_mode
+    from ..gear.bifurcation import amplitude_residuals, embed_subharmonic, half_order_mode
 
     sol = point.solution
     hb2 = HarmonicBalance(model.ndof, harmonics2, 2, samples2)
@@ -575,8 +533,8 @@ def follow_period_doubling(model, point, omega_lo, omega_hi, *, harmonics2, samp
     if leg.status == Status.STOPPED and len(omega) >= 2:
         end = omega_lo if omega[-1] < omega_lo else omega_hi
         k = len(omega) - 2  # the last point inside the range
-        both_p, resid_p, fixed = gear_residual_functions(hb2, system)
-        last = continuation(both_p, resid_p, zs[k], float(omega[k]), end, frc_method(w_star, end),
+        both_p, resid_p, fixed = residual_functions(hb2, system)
+        last = continuation(both_p, resid_p, zs[k], float(omega[k]), end, sweep_method(w_star, end),
                             max_points=max_points, tolerance=tolerance, args=fixed)
         omega = np.concatenate([omega[: k + 1], np.asarray(last.p)[1:]])
         zs = np.concatenate([zs[: k + 1], np.asarray(last.z)[1:]])
@@ -602,7 +560,7 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
 
     **Returns:** ``(records for frc.json, rows for frc.csv, plot data per branch)``.
     """
-    from ..stability import is_stable
+    from ..engine.floquet import is_stable
 
     so, sw = config.solver, config.sweep
     flags = _pd_flags(multipliers)
@@ -657,7 +615,7 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
                     mults, method2, warning2 = _multipliers(hb2, system2, omega, zs, progress,
                                                             label="Floquet multipliers (nu = 2)")
                 except ImportError:
-                    mults, method2, warning2 = [None] * len(omega), None, "hbgear.stability unavailable"
+                    mults, method2, warning2 = [None] * len(omega), None, "hbgear.engine.floquet unavailable"
                 read = read_outs(model, omega, zs, hb2)
                 for i, (w, r, m) in enumerate(zip(omega, res, mults)):
                     floq = np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0)
@@ -735,9 +693,9 @@ def run(config, args, out_dir) -> int:
     harmonics, samples, start, harmonics_rule = _harmonics(config, model, omega_start, omega_stop, nu)
     hb = HarmonicBalance(model.ndof, harmonics, nu, samples)
     system = GearSystem(model)
-    residual_and_jacobians, residual, fixed = gear_residual_functions(hb, system)
+    residual_and_jacobians, residual, fixed = residual_functions(hb, system)
     step = None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm)
-    method = frc_method(omega_start, omega_stop, step)
+    method = sweep_method(omega_start, omega_stop, step)
 
     def solve_start():
         return solve_periodic(model, omega_start, harmonics=harmonics, nu=nu, samples=samples,
@@ -861,7 +819,7 @@ def run(config, args, out_dir) -> int:
             "available": bool(np.all(np.isfinite(floquet))),
             "method": stability_method,
             "warning": stability_warning,
-            "criterion": "hbgear.stability.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
+            "criterion": "hbgear.engine.floquet.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
             "max_abs_floquet is over the base period (nu mesh periods)",
             "unstable_points": int(np.sum(stable == 0)),
             "unstable_zones": zones,

@@ -1,16 +1,16 @@
 r"""Harmonic-balance residual, exact Jacobians and Hill matrices (MODEL.md section 5).
 
 Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (see
-:mod:`hbgear.system`) on the base frequency ``w = w_exc / nu``, harmonics ``0..H``::
+:mod:`hbgear.gear.system`) on the base frequency ``w = w_exc / nu``, harmonics ``0..H``::
 
     R(X) = (M (x) D^2 + K_conv + C_conv (I (x) D)) X - F - P Q_nl(E X, E (I (x) D) X) = 0
 
 - ``X``: real Fourier coefficients, coordinate-major, each ``[a_0, a_1, b_1, ..., a_H, b_H]``
-  (:mod:`hbgear.fourier`), scaled by the system's ``displacement_scale``; ``R`` is scaled by
+  (:mod:`hbgear.engine.fourier`), scaled by the system's ``displacement_scale``; ``R`` is scaled by
   ``force_scale``.
 - ``K_conv``, ``C_conv``, ``F``: Galerkin matrices / vector of the affine periodic part
   ``Q_lin = F(s) - K(s) q - C(s) q'``, from its exact Fourier coefficients (composite
-  Gauss--Legendre between the breakpoints, :mod:`hbgear.quadrature`): no sampling error.
+  Gauss--Legendre between the breakpoints, :mod:`hbgear.engine.quadrature`): no sampling error.
 - ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
   with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
   of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._sample_points`):
@@ -26,7 +26,7 @@ The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from functools import lru_cache, partial
 
 import jax
 import jax.numpy as jnp
@@ -37,7 +37,7 @@ from .quadrature import mesh_period_rule
 
 jax.config.update("jax_enable_x64", True)
 
-__all__ = ["HarmonicBalance"]
+__all__ = ["HarmonicBalance", "residual_functions"]
 
 
 @dataclass(frozen=True)
@@ -510,6 +510,30 @@ class HarmonicBalance:
         d2 = jnp.kron(mass, jnp.eye(self.block)) * xs
         d1 = (jv + 2 * jnp.kron(mass, d)) * xs
         return jz * xs, d1, d2
+
+
+def residual_functions(hb: HarmonicBalance, system):
+    """``(residual_and_jacobians, residual, args)`` in the form
+    :func:`~hbgear.engine.continuation.continuation` takes: ``continuation(rj, r, ..., args=args)``.
+
+    The two functions take ``(z, p, system, quadrature)`` and are the same objects for every
+    system solved with `hb`; ``args = (system, its quadrature)``. The system's parameters are
+    thus arguments of the compiled corrector, not constants in it: a new system with the
+    same structure (e.g. a gear pair with the same ``H``, ``N``, laws, boundary) reuses the
+    compiled program, in this process and from the disk cache.
+    """
+    return (*_functions_of(hb), (system, hb.quadrature(system)))
+
+
+@lru_cache(maxsize=16)
+def _functions_of(hb: HarmonicBalance):
+    def residual_and_jacobians(z, p, system, quadrature):
+        return hb.residual_and_jacobians(jnp.asarray(z), p, system, quadrature)
+
+    def residual(z, p, system, quadrature):
+        return hb.residual(jnp.asarray(z), p, system, quadrature)
+
+    return residual_and_jacobians, residual
 
 
 def _breakpoint_key(system, p) -> tuple:

@@ -4,7 +4,7 @@ With ``mu = lam / w`` (``w`` the base frequency) the linearised harmonic-balance
 
     P(mu) v = (A0 + mu A1 + mu^2 A2) v = 0,    A0 = J,  A1 = w D1,  A2 = w^2 D2
 
-(:meth:`hbgear.hb.HarmonicBalance.hill_matrices`), of size ``N = n (2H+1)``. Its ``2N``
+(:meth:`hbgear.engine.hb.HarmonicBalance.hill_matrices`), of size ``N = n (2H+1)``. Its ``2N``
 eigenvalues come in families ``mu + i k`` (copies: the same Floquet multiplier
 ``exp(2 pi mu)``); of every family the member whose eigenvector is most concentrated on the
 central harmonics is the Floquet exponent (Lazarus & Thomas 2010). Two ways to get them, with
@@ -103,7 +103,7 @@ def hill_quadratic(hb, zs, ps, system, chunk: int = 32):
     """``(A0, A1, A2, w)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``: shapes ``(m, N, N)``, ``(m,)``.
 
     Small problems (``N <= REFINE_MIN_SIZE``): one jitted, vmapped
-    :meth:`~hbgear.hb.HarmonicBalance.hill_matrices` call per `chunk` points (the last chunk
+    :meth:`~hbgear.engine.hb.HarmonicBalance.hill_matrices` call per `chunk` points (the last chunk
     padded, so one compilation serves every curve length), which removes the per-call
     overhead that dominates there. Larger ones: one call per point (vmapping the sampled
     Toeplitz blocks is slower per point on the CPU than the single calls).

@@ -43,7 +43,7 @@ import scipy.linalg
 
 from .newton import newton
 
-__all__ = ["PseudoArclength", "continuation", "Branch", "Status", "PointKind"]
+__all__ = ["PseudoArclength", "continuation", "sweep_method", "Branch", "Status", "PointKind"]
 
 
 class Status(enum.IntEnum):
@@ -99,8 +99,8 @@ class PseudoArclength:
       to ``SEGMENT_POINTS`` per call, with the same predictor, acceptance tests and step-size
       control) inside it; any other step (refused, failed, a fold, the end of the range) goes
       back to the Python loop. Needs residual functions that
-      JAX can trace in ``(z, p, *args)`` (e.g. :func:`hbgear.commands.frc.gear_residual_functions`,
-      the gear pair in ``args``, or :meth:`hbgear.hb.HarmonicBalance.residual_and_jacobians`
+      JAX can trace in ``(z, p, *args)`` (e.g. :func:`hbgear.engine.hb.residual_functions`,
+      the gear pair in ``args``, or :meth:`hbgear.engine.hb.HarmonicBalance.residual_and_jacobians`
       with the system closed over); otherwise the run falls back to the Python corrector with
       a warning. Same algorithm, same points to rounding (LU by XLA instead of scipy); it
       removes the per-evaluation and per-step dispatch and conversion overhead, which dominates
@@ -143,6 +143,25 @@ class PseudoArclength:
             raise ValueError("growth must be > 1")
         if self.max_parameter_step is not None and not self.max_parameter_step > 0:
             raise ValueError(f"max_parameter_step must be > 0, got {self.max_parameter_step}")
+
+
+def sweep_method(p_start, p_stop, step=None) -> PseudoArclength:
+    """Continuation options for a sweep of the parameter from `p_start` to `p_stop`.
+
+    ``p_ref`` = the larger end value; the unknowns are scaled (the gear pair: in static
+    deflections), so a step moves them by at most 0.25 (``ds_max``) and the parameter by at most
+    1/100 of the range (``max_parameter_step``; at least ~100 points on a flat curve); tangents
+    turn by at most 5 deg per step. First step: `step` (same unit as ``p``; the gear pair's
+    ``[sweep] step_rpm``) or 1/4 of the largest parameter step. Compiled chord corrector.
+    """
+    scale = max(abs(p_start), abs(p_stop))
+    dp_max = abs(p_stop - p_start) / scale / 100
+    ds = dp_max / 4 if step is None else step / scale
+    dp_max = max(dp_max, ds)
+    return PseudoArclength(
+        ds=ds, ds_min=min(1e-7, ds / 10), ds_max=max(0.25, ds), max_angle_deg=5.0,
+        parameter_scale=scale, max_parameter_step=dp_max, jit_step=True, chord=True,
+    )
 
 
 @dataclass(frozen=True)
@@ -363,7 +382,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         tangent), on failure the Newton iteration restarts from the predictor.
         """
         # The callables are traced in (z, p, *args): `args` are arguments of the compiled program
-        # (the gear pair and its quadrature for hbgear.commands.frc.gear_residual_functions),
+        # (the gear pair and its quadrature for hbgear.engine.hb.residual_functions),
         # whatever they close over is a constant in it.
         def evaluate(y):
             r, jz, jp = residual_and_jacobians(y[:-1], y[-1] * scale, *args)

@@ -1,8 +1,8 @@
 """Command-line framework: `hbgear <command> CONFIG [--set section.key=value ...] [--out DIR]`.
 
 Commands live in a registry (:data:`COMMANDS`) filled through :func:`register`; the built-in
-ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are registered by
-`hbgear.commands` when that package exists (see :func:`_load_builtin_commands`).
+ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules of this package
+(see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
 overrides -> the command's optional `validate(config, args)` -> create the output directory
@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
-import importlib.util
 import math
 import sys
 from collections.abc import Callable, Sequence
@@ -27,9 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
-from .config import RunConfig, load_config
-from .errors import ConfigError, ConvergenceError
-from .io import prepare_out_dir
+from ..config import RunConfig, load_config
+from ..errors import ConfigError, ConvergenceError
+from ..outputs.io import prepare_out_dir
 
 __all__ = [
     "COMMANDS",
@@ -57,7 +56,7 @@ class Command:
     - `add_arguments(parser)`: adds the command's own options (CONFIG, `--set` and `--out`
       are added by the framework). May be `None`.
     - `run(config, args, out_dir) -> int`: does the work and writes into `out_dir` (already
-      created) through :mod:`hbgear.io`; returns the exit status (normally 0). Raise
+      created) through :mod:`hbgear.outputs.io`; returns the exit status (normally 0). Raise
       `ConfigError` for bad input and `ConvergenceError` for a failed computation.
     - `validate(config, args)`: optional check of the command's options against the
       config, run before the output directory is created; raise `ConfigError`.
@@ -86,14 +85,14 @@ def register(command: Command, *, replace: bool = False) -> Command:
     return command
 
 
-def _load_builtin_commands() -> None:
-    """Register the shipped commands.
+#: The shipped commands: one module each in this package, registering itself on import.
+BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "validate")
 
-    The built-in commands are registered by importing `hbgear.commands` (a package whose
-    modules call :func:`register`).
-    """
-    if importlib.util.find_spec("hbgear.commands") is not None:
-        importlib.import_module("hbgear.commands")
+
+def _load_builtin_commands() -> None:
+    """Register the shipped commands (importing each module of :data:`BUILTIN_COMMANDS`)."""
+    for name in BUILTIN_COMMANDS:
+        importlib.import_module(f"{__name__}.{name}")
 
 
 # ----------------------------------------------------------------------------- option types

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cli import Command, register
-from ..io import write_csv_atomic, write_json_atomic
-from ..model import PAIR_SLOTS
-from ..stability import is_stable
+from . import Command, register
+from ..outputs.io import write_csv_atomic, write_json_atomic
+from ..gear.model import PAIR_SLOTS
+from ..engine.floquet import is_stable
 from .common import add_speed_argument, floquet_of, model_of, solution_record, solve_config
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ..build import build_model
-from ..cli import positive_float
-from ..solve import PeriodicSolution, auto_harmonics, rpm_to_rad_s, solve_periodic
+from . import positive_float
+from ..gear.solve import PeriodicSolution, auto_harmonics, rpm_to_rad_s, solve_periodic
 
 __all__ = ["add_speed_argument", "model_of", "solve_config", "solution_record"]
 
@@ -68,9 +68,9 @@ def solution_record(solution: PeriodicSolution) -> dict:
 
 def floquet_of(solution: PeriodicSolution):
     """Floquet multipliers of a solution by Hill's method (trivial ones removed)."""
-    from ..hb import HarmonicBalance
-    from ..stability import hill_multipliers
-    from ..system import GearSystem
+    from ..engine.hb import HarmonicBalance
+    from ..engine.floquet import hill_multipliers
+    from ..gear.system import GearSystem
 
     hb = HarmonicBalance(solution.model.ndof, solution.harmonics, solution.nu, solution.samples)
     return hill_multipliers(hb, solution.z, solution.omega_pinion, GearSystem(solution.model))

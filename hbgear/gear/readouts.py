@@ -41,7 +41,7 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
 
     **Arguments:**
 
-    - `model`: the :class:`~hbgear.model.GearPairModel`; `omega_pinion`: ``Omega_p`` [rad/s].
+    - `model`: the :class:`~hbgear.gear.model.GearPairModel`; `omega_pinion`: ``Omega_p`` [rad/s].
     - `s`: mesh phase in [0, 1) at the nodes; `q`, `qd`: state at the nodes, shape
       ``(ndof, n)`` [m], [m/s]; `weights`: quadrature weights over the period (sum 1).
     - `u_static`: the spring's static wind-up [m]; `reaction`: ``T_g/R_bg`` [N] (reaction).

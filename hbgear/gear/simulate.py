@@ -1,6 +1,6 @@
 r"""Time integration of the gear pair to a periodic steady state: the reference for harmonic balance.
 
-The equations are those of :class:`~hbgear.model.GearPairModel`, ``M q'' = Q(s, q, q')`` with
+The equations are those of :class:`~hbgear.gear.model.GearPairModel`, ``M q'' = Q(s, q, q')`` with
 the mesh phase ``s = (t mod T_m)/T_m`` (``t = 0`` at a pair's entry), written as the first-order
 system ``y = (q, q')``, ``y' = (q', M^{-1} Q)``.
 
@@ -70,7 +70,7 @@ and ``u'`` are steady, so the read-out period integrates the equations with one 
 machinery (:class:`_Integrator`) and no steady-state test, keeping per-cycle read-outs and the
 Poincare samples (unstable zones, transients, paper Figs. 12 and 14).
 
-**Read-outs.** The summary comes from :func:`hbgear.metrics.periodic_summary` over one steady
+**Read-outs.** The summary comes from :func:`hbgear.gear.readouts.periodic_summary` over one steady
 period, evaluated at composite Gauss--Legendre nodes of the segments between breakpoints (the
 dense output of each segment), exactly as harmonic balance reads out its solution.
 """
@@ -86,9 +86,9 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .errors import ConfigError, ConvergenceError
-from .metrics import periodic_summary
-from .quadrature import mesh_period_rule
+from ..errors import ConfigError, ConvergenceError
+from .readouts import periodic_summary
+from ..engine.quadrature import mesh_period_rule
 
 __all__ = ["TimeResponse", "MarchRecord", "simulate", "march", "DEFAULT_V_REG"]
 
@@ -113,7 +113,7 @@ class TimeResponse:
       ``(PAIR_SLOTS, n)`` from :meth:`GearPairModel.pair_friction` (``normal`` [N], ``mu`` [-],
       ``friction`` [N], ``vs``, ``vr`` [m/s], ``sigma``, ``xi_p``, ``xi_g`` [m]); slot ``k`` is
       the pair that entered ``k`` mesh periods before the current one.
-    - `summary`: :func:`~hbgear.metrics.periodic_summary` over one steady period.
+    - `summary`: :func:`~hbgear.gear.readouts.periodic_summary` over one steady period.
     - `period_cycles`: 1, or 2 when period-doubled; `cycles`: mesh cycles integrated;
       `steady_measure`: the DTE change between periods reached (relative to peak-to-peak).
     - `nodes`: ``(s, q, qd, weights)`` at the quadrature nodes of the steady period (weights sum
@@ -311,7 +311,7 @@ def _initial_reaction(model, omega):
     """Output force [N] of the quasi-static state: ``<F_2>`` with zero velocities (``"reaction"``)."""
     if model.boundary != "reaction":
         return 0.0
-    from .quadrature import mesh_period_rule
+    from ..engine.quadrature import mesh_period_rule
 
     s, w = mesh_period_rule(model.breakpoint_candidates(), 4)
     delta, _ = model.static_state(omega)
@@ -495,7 +495,7 @@ def simulate(
 
     **Arguments:**
 
-    - `model`: a :class:`~hbgear.model.GearPairModel` (any boundary); `omega_pinion`:
+    - `model`: a :class:`~hbgear.gear.model.GearPairModel` (any boundary); `omega_pinion`:
       ``Omega_p`` [rad/s].
     - `max_cycles`: at most this many mesh periods are integrated.
     - `rtol`, `atol`: integrator tolerances; `atol` [m] applies to the displacements (default
@@ -641,7 +641,7 @@ class MarchRecord:
       (mean and RMS by the quadrature rule of :func:`simulate`, peak-to-peak over its nodes
       and the grid).
     - `reaction_force_N`: output force used in every cycle (``"reaction"``; zeros otherwise).
-    - `last_summary`: :func:`~hbgear.metrics.periodic_summary` over the last cycle (means over
+    - `last_summary`: :func:`~hbgear.gear.readouts.periodic_summary` over the last cycle (means over
       that cycle; a power balance only once the run has settled).
     - `cycles`: cycles integrated (fewer than asked when `stopped_early`); `first_cycle`.
     - `u_static` [m]; `method`; `elapsed_s` [s]; `friction_law` used.

@@ -18,13 +18,13 @@ from functools import lru_cache
 import jax.numpy as jnp
 import numpy as np
 
-from . import fourier
-from .errors import ConvergenceError
-from .hb import HarmonicBalance, _breakpoint_key
-from .metrics import SUMMARY_KEYS, periodic_summary
+from ..engine import fourier
+from ..errors import ConvergenceError
+from ..engine.hb import HarmonicBalance, _breakpoint_key
+from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
-from .newton import newton
-from .quadrature import mesh_period_rule
+from ..engine.newton import newton
+from ..engine.quadrature import mesh_period_rule
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -43,7 +43,7 @@ class PeriodicSolution:
     """A converged harmonic-balance solution.
 
     **Fields:** `model`; `omega_pinion` [rad/s]; `harmonics` ``H``; `nu`; `samples` ``N``;
-    `coefficients` [m], shape ``(ndof, 2H+1)`` (real basis of :mod:`hbgear.fourier` on the base
+    `coefficients` [m], shape ``(ndof, 2H+1)`` (real basis of :mod:`hbgear.engine.fourier` on the base
     frequency ``w_m/nu``); `reaction_force_N` (``T_g/R_bg`` for the reaction boundary);
     `u_static_m`; `residual_norm` (scaled by the static load); `iterations`; `z` (scaled
     unknowns, for continuation).
@@ -143,7 +143,7 @@ def _synthesize(coefficients, base_frequency, cos, sin):
 
 
 def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
-    """:func:`~hbgear.metrics.periodic_summary` of ``P`` solutions at once (exact quadrature over
+    """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
     [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]

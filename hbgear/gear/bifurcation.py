@@ -16,9 +16,9 @@ Three tools, each checked against time integration in ``tests/test_bifurcation.p
   amplitude ``a``; Newton from ``z_* + a phi`` at fixed speed would fall back onto the
   ``nu = 1`` solution, which also solves the ``nu = 2`` equations), and
   :func:`continue_period_doubled` follows the new branch with
-  :func:`hbgear.continuation.continuation`, around its fold if it is born subcritical.
+  :func:`hbgear.engine.continuation.continuation`, around its fold if it is born subcritical.
   :func:`solve_period_doubled` converges one ``nu = 2`` solution from a given start with
-  :func:`hbgear.solve.solve_periodic` and rejects a collapse back onto the ``nu = 1`` solution.
+  :func:`hbgear.gear.solve.solve_periodic` and rejects a collapse back onto the ``nu = 1`` solution.
 - **Backlash folds** (:func:`backlash_frc`): the frequency-response curve by arclength
   continuation through both turning points of the softening contact-loss resonance, with the
   fold speeds.
@@ -27,7 +27,7 @@ Three tools, each checked against time integration in ``tests/test_bifurcation.p
   shows; the jump speeds are bracketed by bisection.
 
 !!! note
-    :func:`hbgear.simulate.simulate` always starts from the quasi-static state. Until it takes
+    :func:`hbgear.gear.simulate.simulate` always starts from the quasi-static state. Until it takes
     an initial state, the sweeps call it through :func:`_simulate_from`, which substitutes the
     start state for the duration of one call (not thread-safe: one sweep per process at a time).
 """
@@ -43,9 +43,9 @@ import numpy as np
 import scipy.linalg
 
 from . import simulate as _simulate_module
-from .continuation import Branch, PseudoArclength, Status, continuation, illinois
-from .errors import ConvergenceError
-from .hb import HarmonicBalance
+from ..engine.continuation import Branch, PseudoArclength, Status, continuation, illinois
+from ..errors import ConvergenceError
+from ..engine.hb import HarmonicBalance
 from .solve import PeriodicSolution, rad_s_to_rpm, rpm_to_rad_s, solve_periodic
 from .system import GearSystem
 
@@ -159,13 +159,14 @@ class PeriodDoublingPoint(NamedTuple):
 def period_doubling_multiplier(model, solution: PeriodicSolution) -> float:
     """The most negative real Floquet multiplier per mesh period (``nan`` if none is real negative).
 
-    Exact monodromy for linear models (:func:`hbgear.stability.multipliers_linear`), the
+    Exact monodromy for linear models (:func:`hbgear.gear.monodromy.multipliers_linear`), the
     variational equations along the ``nu = 1`` solution otherwise
-    (:func:`hbgear.stability.monodromy_variational`). Hill's method is not used here: with a
+    (:func:`hbgear.gear.monodromy.monodromy_variational`). Hill's method is not used here: with a
     few harmonics its selection of the real negative multiplier (whose exponents sit at
     half-integer harmonic centres) is not reliable enough to bracket the crossing.
     """
-    from .stability import monodromy_variational, most_negative_real, multipliers_linear
+    from ..engine.floquet import most_negative_real
+    from .monodromy import monodromy_variational, multipliers_linear
 
     if solution.nu != 1:
         raise ValueError("period_doubling_multiplier needs a nu = 1 solution")
@@ -306,7 +307,7 @@ def solve_period_doubled(
     max_iterations: int = 50,
     min_share: float = 1e-3,
 ) -> PeriodicSolution:
-    """One ``nu = 2`` solution by :func:`~hbgear.solve.solve_periodic` from `z0` (e.g. an
+    """One ``nu = 2`` solution by :func:`~hbgear.gear.solve.solve_periodic` from `z0` (e.g. an
     embedded ``nu = 1`` solution plus a half-order perturbation, or a neighbour on the branch).
 
     **Raises:** :class:`~hbgear.errors.ConvergenceError` if Newton fails, or if it converged
@@ -418,7 +419,8 @@ def continue_period_doubled(
     **Returns:** a :class:`SubharmonicBranch` (`reached` False if the amplitude limit or
     `max_points` came first; the message says which).
     """
-    from .commands.frc import frc_method, gear_residual_functions
+    from ..engine.continuation import sweep_method
+    from ..engine.hb import residual_functions
 
     sol = point.solution
     h2 = 2 * sol.harmonics if harmonics is None else int(harmonics)
@@ -450,10 +452,10 @@ def continue_period_doubled(
                    f"({leg.status.name}: {leg.message})")
         return SubharmonicBranch(omega, zs, amp, hb2, model, point, False, leg.status, message, phi)
     k = int(crossed[0])
-    both_p, resid_p, fixed = gear_residual_functions(hb2, system)
+    both_p, resid_p, fixed = residual_functions(hb2, system)
     start = max(k - 1, 0)
     last = continuation(both_p, resid_p, zs[start], float(omega[start]), omega_end,
-                        frc_method(w_star, omega_end), max_points=max_points, tolerance=tolerance, args=fixed)
+                        sweep_method(w_star, omega_end), max_points=max_points, tolerance=tolerance, args=fixed)
     z_last = np.asarray(last.z)
     amp_last = z_last @ phi - offset
     omega = np.concatenate([omega[: start + 1], np.asarray(last.p)[1:]])
@@ -467,7 +469,7 @@ def continue_period_doubled(
 
 def _dense_p2p_um(z, hb: HarmonicBalance, scale: float, samples: int = 2048) -> float:
     """Peak-to-peak DTE [um] of scaled unknowns `z` (displacement scale `scale` [m]) on a dense grid."""
-    from . import fourier
+    from ..engine import fourier
 
     x = np.asarray(z, dtype=float).reshape(hb.ndof, hb.block)[0]
     return float(np.ptp(fourier.synthesize(x, hb.harmonics, max(samples, 2 * hb.harmonics + 2)))) * 1e6 * scale
@@ -533,14 +535,15 @@ def backlash_frc(
     softening contact-loss resonance has two: where the curve turns back and where it turns
     forward again).
     """
-    from .commands.frc import frc_method, gear_residual_functions
+    from ..engine.continuation import sweep_method
+    from ..engine.hb import residual_functions
 
     samples = samples or max(512, 16 * harmonics)
     w0, w1 = rpm_to_rad_s(rpm_start), rpm_to_rad_s(rpm_stop)
     start = solve_periodic(model, w0, harmonics=harmonics, samples=samples, tolerance=tolerance)
     hb = HarmonicBalance(model.ndof, harmonics, 1, samples)
-    both, resid, fixed = gear_residual_functions(hb, GearSystem(model))
-    method = frc_method(w0, w1, None if step_rpm is None else rpm_to_rad_s(step_rpm))
+    both, resid, fixed = residual_functions(hb, GearSystem(model))
+    method = sweep_method(w0, w1, None if step_rpm is None else rpm_to_rad_s(step_rpm))
     branch = continuation(both, resid, start.z, w0, w1, method, max_points=max_points, tolerance=tolerance,
                           args=fixed)
     scale = float(GearSystem(model).displacement_scale)

@@ -25,7 +25,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 __all__ = [
     "prepare_out_dir",

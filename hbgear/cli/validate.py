@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cli import Command, register
-from ..io import save_figure_atomic, write_csv_atomic
-from ..simulate import simulate
-from ..solve import rpm_to_rad_s
+from . import Command, register
+from ..outputs.io import save_figure_atomic, write_csv_atomic
+from ..gear.simulate import simulate
+from ..gear.solve import rpm_to_rad_s
 from .common import add_speed_argument, model_of, solve_config
 
 HEADER = ["speed_rpm", "hb_dte_rms_um", "ti_dte_rms_um", "hb_dte_p2p_um", "ti_dte_p2p_um", "rel_diff_rms", "rel_diff_p2p"]

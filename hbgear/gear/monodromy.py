@@ -1,11 +1,4 @@
-r"""Floquet stability of periodic steady states (MODEL.md section 6).
-
-A periodic solution ``q*(t)`` of ``M q'' = Q(s, q, q')`` is stable iff every Floquet
-multiplier of the linearised equations
-
-    M y'' = Q_q(t) y + Q_qd(t) y',      Q_q = dQ/dq,  Q_qd = dQ/dq'  along q*(t)
-
-has modulus below one (trivial rigid-body multipliers excepted). Three ways to get them:
+r"""Exact and variational monodromy of the gear pair's periodic steady states (MODEL.md section 6).
 
 - **Exact monodromy for linear models** (:func:`monodromy_linear`, :func:`monodromy_ltv_a`).
   For LTV formulation A (and LTI) the coefficients are piecewise constant in the mesh phase
@@ -15,129 +8,32 @@ has modulus below one (trivial rigid-body multipliers excepted). Three ways to g
   fourth-order Magnus steps between the breakpoints are used. Both are batched over speeds.
 - **Variational equations** (:func:`monodromy_variational`): ``solve_ivp`` over one base
   period, segment by segment between the breakpoints, with ``Q_q``, ``Q_qd`` from ``jax.jacfwd``
-  of :meth:`~hbgear.model.GearPairModel.generalized_force` along the periodic solution.
-- **Hill's method** (:func:`hill_multipliers`, :func:`hill_multipliers_batch`) on the
-  harmonic-balance Jacobian: of the quadratic eigenproblem ``(J + lam D1 + lam^2 D2) v = 0``,
-  whose ``2 n (2H+1)`` eigenvalues come in families of copies ``lam + i k w`` (one multiplier
-  each), the ``2n`` members whose eigenvectors are most concentrated on the central harmonics
-  are kept (Lazarus & Thomas 2010); multipliers ``exp(lam T)``, ``T = 2 pi / w``. By default
-  only those central eigenpairs are computed (refined from a low-harmonic sub-problem, batched
-  over points, see :mod:`hbgear.hill`); ``method="dense"`` takes all eigenpairs of the companion
-  linearisation instead, with the same result.
-
-Trivial multipliers: with the ``"reaction"`` boundary the coordinate ``u`` has no restoring
-force, so the linearisation has the exponent 0 twice (a Jordan block: ``u = const``,
-``u = t``); those (at most two, within :data:`TRIVIAL_TOL` of 0) are dropped. The ``"spring"``
-boundary's soft mode is a real, lightly damped mode (multiplier just inside the unit circle)
-and is kept.
+  of :meth:`~hbgear.gear.model.GearPairModel.generalized_force` along the periodic solution.
 
 Limitation: with the Coulomb law (``sgn``) the linearisation ignores the jumps of ``mu`` at
-the instantaneous pitch-point crossings of NLTV models (no saltation matrices), both in the
-variational equations and in Hill's method; smooth laws (arctan) are treated exactly.
+the instantaneous pitch-point crossings of NLTV models (no saltation matrices); smooth laws
+(arctan) are treated exactly.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
+from ..engine.floquet import TRIVIAL_TOL, hill_multipliers
+
 __all__ = [
-    "TRIVIAL_TOL",
-    "StabilityInfo",
-    "classify",
+    "expm_batched",
     "floquet_multipliers",
-    "hill_exponents",
-    "hill_exponents_batch",
-    "hill_multipliers",
-    "hill_multipliers_batch",
-    "is_stable",
-    "max_abs_multiplier",
-    "most_negative_real",
-    "model_at_contact_ratio",
     "monodromy_linear",
     "monodromy_ltv_a",
     "monodromy_variational",
     "multipliers_linear",
-    "period_doubling",
-    "stability_map",
-    "stability_map_ltv_a",
-    "stability_row",
 ]
-
-#: Multipliers within this distance of 1 (exponents within ``TRIVIAL_TOL/(2 pi)`` of 0, in
-#: units of the base frequency) count as the trivial rigid-body ones of the reaction boundary.
-TRIVIAL_TOL = 1e-5
 
 _SQRT3 = np.sqrt(3.0)
 _GAUSS2 = (0.5 - _SQRT3 / 6.0, 0.5 + _SQRT3 / 6.0)
-
-
-# ============================================================================ classification
-
-
-class StabilityInfo(NamedTuple):
-    """Summary of a set of Floquet multipliers.
-
-    **Fields:** `max_abs` (largest modulus); `stable` (see :func:`is_stable`); `kind`: ``"stable"``,
-    ``"period-doubling"`` (a real multiplier below -1: continue the ``nu = 2`` branch),
-    ``"fold"`` (a real multiplier above +1) or ``"secondary-hopf"`` (a complex pair outside).
-    """
-
-    max_abs: float
-    stable: bool
-    kind: str
-
-
-def max_abs_multiplier(multipliers) -> float:
-    """``max |mu_i|`` (``nan`` for an empty or non-finite set)."""
-    m = np.asarray(multipliers)
-    if m.size == 0 or not np.all(np.isfinite(m)):
-        return float("nan")
-    return float(np.max(np.abs(m)))
-
-
-def is_stable(multipliers, tol: float = 1e-9) -> bool:
-    """``True`` iff every multiplier has ``|mu| <= 1 + tol`` (the trivial ones already dropped).
-
-    The small tolerance keeps a neutrally stable mode (exactly on the unit circle up to
-    rounding, e.g. an undamped model) from being reported unstable.
-    """
-    value = max_abs_multiplier(multipliers)
-    return bool(np.isfinite(value) and value <= 1.0 + tol)
-
-
-def period_doubling(multipliers, tol: float = 1e-9) -> bool:
-    """``True`` iff a real multiplier lies below ``-1 - tol`` (it left through -1).
-
-    The caller should then continue the sub-harmonic branch (``nu = 2``, MODEL.md section 6).
-    "Real" means ``|Im mu| <= 1e-6 |mu|`` (a complex pair that collided on the negative real axis
-    becomes real there).
-    """
-    return bool(most_negative_real(multipliers) < -1.0 - tol)
-
-
-def most_negative_real(multipliers) -> float:
-    """The most negative real multiplier (``nan`` if none); "real" as in :func:`period_doubling`."""
-    m = np.asarray(multipliers)
-    negative = m.real[(np.abs(m.imag) <= 1e-6 * np.maximum(np.abs(m), 1.0)) & (m.real < 0)]
-    return float(np.min(negative)) if negative.size else float("nan")
-
-
-def classify(multipliers, tol: float = 1e-9) -> StabilityInfo:
-    """Stable, or how the dominant multiplier left the unit circle."""
-    m = np.asarray(multipliers)
-    value = max_abs_multiplier(m)
-    if is_stable(m, tol):
-        return StabilityInfo(value, True, "stable")
-    if not np.isfinite(value):
-        return StabilityInfo(value, False, "unknown")
-    lead = m[np.argmax(np.abs(m))]
-    if abs(lead.imag) <= 1e-6 * abs(lead):
-        return StabilityInfo(value, False, "period-doubling" if lead.real < 0 else "fold")
-    return StabilityInfo(value, False, "secondary-hopf")
 
 
 def _drop_trivial(multipliers: np.ndarray, boundary: str, tol: float = TRIVIAL_TOL) -> np.ndarray:
@@ -279,7 +175,7 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
 
     **Arguments:**
 
-    - `model`: a :class:`~hbgear.model.GearPairModel` with ``model.is_linear`` (LTI, or LTV
+    - `model`: a :class:`~hbgear.gear.model.GearPairModel` with ``model.is_linear`` (LTI, or LTV
       with teeth that never separate).
     - `omegas`: pinion speeds ``Omega_p`` [rad/s], scalar or 1-D.
     - `substeps`: Magnus sub-steps per segment; default 1 for piecewise-constant models
@@ -432,8 +328,8 @@ def monodromy_variational(
 
     **Arguments:**
 
-    - `model`: any :class:`~hbgear.model.GearPairModel` (formulation B, NLTV, backlash, ...).
-    - `solution_or_state_fn`: a :class:`~hbgear.solve.PeriodicSolution` (its ``state_at``,
+    - `model`: any :class:`~hbgear.gear.model.GearPairModel` (formulation B, NLTV, backlash, ...).
+    - `solution_or_state_fn`: a :class:`~hbgear.gear.solve.PeriodicSolution` (its ``state_at``,
       ``u_static_m`` and ``reaction_force_N`` are used; its ``nu`` overrides `nu`) or a callable
       ``base_fraction -> (q, q')`` with arrays of shape ``(ndof,)`` or ``(ndof, 1)`` [m, m/s].
     - `omega`: pinion speed ``Omega_p`` [rad/s]; `nu`: base period in mesh periods.
@@ -495,78 +391,6 @@ def monodromy_variational(
     return phi
 
 
-# ============================================================================ Hill's method
-
-
-def _zero_tol(system, drop_trivial: bool):
-    """Exponent tolerance (``mu = lam / w``) of the trivial pair, or ``None`` when none is dropped."""
-    if drop_trivial and getattr(system, "free_mean_dof", None) is not None:
-        return TRIVIAL_TOL / (2.0 * np.pi)
-    return None
-
-
-def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
-                         method: str = "auto"):
-    """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
-
-    Small problems get their Hill matrices from one jitted, vmapped call per chunk of points;
-    the refinement runs stacked over all points (:func:`hbgear.hill.refined_central_batch`).
-    On the Duffing benchmark (H = 7) this is several times cheaper per point than one call per
-    point.
-    """
-    from .hill import central_exponents, hill_quadratic
-
-    ps = np.atleast_1d(np.asarray(ps, dtype=float))
-    if ps.size == 0:
-        return []
-    a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
-    mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
-                            copy_tol=copy_tol, method=method)
-    out = []
-    for mu, wk in zip(mus, w):
-        mult = np.exp(2.0 * np.pi * mu)
-        order = np.argsort(-np.abs(mult), kind="stable")
-        out.append((mu[order] * wk, mult[order]))
-    return out
-
-
-def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6, method: str = "auto"):
-    """The ``2n`` Floquet exponents picked from the Hill spectrum, and their multipliers.
-
-    **Returns:** ``(lam, mult)``: exponents [1/s] and multipliers ``exp(lam T)`` over the base
-    period ``T = 2 pi / w`` (``w = w_mesh / nu``), sorted by decreasing ``|mult|``.
-
-    Of every family of copies ``lam + i k w`` of the quadratic eigenproblem
-    ``(J + mu w D1 + mu^2 w^2 D2) v = 0`` (``lam = mu w``) the member whose eigenvector is most
-    concentrated on the central harmonics is kept (:mod:`hbgear.hill`). `method`: ``"dense"``
-    (all eigenpairs of the companion linearisation) or ``"refined"`` = ``"auto"`` (the central
-    eigenpairs only, by inverse iteration seeded from the low harmonics; the dense way where
-    that is not confident): the same exponents either way (to ~1e-13 in the tests).
-    With the reaction boundary the (at most two) exponents within ``TRIVIAL_TOL`` of 0 are
-    dropped.
-    """
-    return hill_exponents_batch(hb, np.asarray(z)[None], [p], system, drop_trivial=drop_trivial,
-                                copy_tol=copy_tol, method=method)[0]
-
-
-def hill_multipliers(hb, z, p, system, **kwargs) -> np.ndarray:
-    """Floquet multipliers of a harmonic-balance solution by Hill's method.
-
-    **Arguments:** `hb`: the :class:`~hbgear.hb.HarmonicBalance` used to solve; `z`: its scaled
-    unknowns (``PeriodicSolution.z``); `p`: the parameter (pinion speed [rad/s] for a
-    ``GearSystem`` in speed); `system`: the system. Keywords go to :func:`hill_exponents`.
-
-    **Returns:** the ``2n`` multipliers (less the trivial pair of the reaction boundary) over
-    the base period ``2 pi nu / w_mesh``, sorted by decreasing modulus.
-    """
-    return hill_exponents(hb, z, p, system, **kwargs)[1]
-
-
-def hill_multipliers_batch(hb, zs, ps, system, **kwargs) -> list[np.ndarray]:
-    """:func:`hill_multipliers` at many points of one problem (see :func:`hill_exponents_batch`)."""
-    return [mult for _, mult in hill_exponents_batch(hb, zs, ps, system, **kwargs)]
-
-
 # ============================================================================ dispatch
 
 
@@ -584,14 +408,14 @@ def floquet_multipliers(
 
     `method`: ``"auto"`` (exact monodromy for linear models, else Hill), ``"monodromy"``,
     ``"hill"`` or ``"variational"``. For non-linear models a
-    :class:`~hbgear.solve.PeriodicSolution` may be given, else one is solved for.
+    :class:`~hbgear.gear.solve.PeriodicSolution` may be given, else one is solved for.
     Multipliers from Hill and the variational equations are over the base period ``nu Tm``.
     """
     if method == "auto":
         method = "monodromy" if model.is_linear else "hill"
     if method == "monodromy":
         return multipliers_linear(model, float(omega))
-    from .hb import HarmonicBalance
+    from ..engine.hb import HarmonicBalance
     from .solve import solve_periodic
     from .system import GearSystem
 
@@ -606,116 +430,3 @@ def floquet_multipliers(
     return hill_multipliers(hb, solution.z, float(omega), GearSystem(model))
 
 
-# ============================================================================ maps
-
-
-def model_at_contact_ratio(cfg, contact_ratio: float):
-    """``build_model(cfg, contact_ratio=...)``: ``k_max``, ``k_min`` held, ``k_mean`` follows (MODEL.md section 2)."""
-    from .build import build_model
-
-    return build_model(cfg, contact_ratio=float(contact_ratio))
-
-
-def _models(cfg_or_models, contact_ratios):
-    if isinstance(cfg_or_models, Sequence) and not isinstance(cfg_or_models, str):
-        return list(cfg_or_models), [float(m.contact_ratio) for m in cfg_or_models]
-    from .build import build_model
-
-    if contact_ratios is None:
-        return [build_model(cfg_or_models)], None
-    return [model_at_contact_ratio(cfg_or_models, g) for g in contact_ratios], list(contact_ratios)
-
-
-def stability_map_ltv_a(cfg_or_models, speeds_rpm, contact_ratios=None) -> np.ndarray:
-    """``max |multiplier|`` over speed x contact ratio for LTV formulation A, exactly and fast.
-
-    **Arguments:** `cfg_or_models`: a ``RunConfig`` (one model per contact ratio is built with
-    :func:`model_at_contact_ratio`, ``k_max``/``k_min`` held) or a sequence of models;
-    `speeds_rpm`: 1-D pinion speeds [rpm]; `contact_ratios`: 1-D (with a config).
-
-    **Returns:** array ``(len(contact_ratios), len(speeds_rpm))`` of the largest multiplier
-    modulus per mesh period (trivial rigid-body pair of the reaction boundary excluded).
-
-    All matrix exponentials of one contact ratio (segments x speeds) are one batched Pade
-    evaluation (:func:`expm_batched`); a 100 x 50 map takes well under a second.
-
-    **Raises:** `ValueError` if a model is not LTV-A/LTI (use :func:`stability_map`).
-    """
-    models, _ = _models(cfg_or_models, contact_ratios)
-    omegas = np.asarray(speeds_rpm, dtype=float) * (2.0 * np.pi / 60.0)
-    out = np.empty((len(models), omegas.size))
-    for i, model in enumerate(models):
-        if not _is_piecewise_constant(model):
-            raise ValueError("stability_map_ltv_a needs LTV formulation-A (or LTI) models; use stability_map")
-        out[i] = np.max(np.abs(multipliers_linear(model, omegas, substeps=1)), axis=-1)
-    return out
-
-
-@dataclass(frozen=True)
-class _HBSettings:
-    harmonics: int = 24
-    nu: int = 1
-    samples: int | None = None
-
-
-def _row_for_model(model, omegas: np.ndarray, settings: _HBSettings):
-    """max |multiplier| at each speed for one model: batched monodromy if linear, else HB + Hill."""
-    if model.is_linear:
-        return np.max(np.abs(multipliers_linear(model, omegas)), axis=-1)
-    from .errors import ConvergenceError
-    from .hb import HarmonicBalance
-    from .solve import solve_periodic
-    from .system import GearSystem
-
-    out = np.full(omegas.size, np.nan)
-    z = None
-    solved, zs = [], []
-    for k, omega in enumerate(omegas):
-        try:
-            sol = solve_periodic(
-                model, float(omega), harmonics=settings.harmonics, nu=settings.nu, samples=settings.samples, z0=z
-            )
-        except ConvergenceError:
-            z = None
-            continue
-        z = sol.z
-        solved.append(k)
-        zs.append(np.asarray(sol.z))
-        hb = HarmonicBalance(model.ndof, sol.harmonics, sol.nu, sol.samples)
-    if solved:
-        # one batched Hill call for the row (all points share hb: same H, nu, N)
-        mults = hill_multipliers_batch(hb, np.stack(zs), omegas[solved], GearSystem(model))
-        # per mesh period, comparable with the linear maps
-        out[solved] = [max_abs_multiplier(m) ** (1.0 / hb.nu) for m in mults]
-    return out
-
-
-def _settings(cfg) -> _HBSettings:
-    solver = getattr(cfg, "solver", None)
-    if solver is None:
-        return _HBSettings()
-    harmonics = solver.harmonics if solver.harmonics is not None else 24
-    return _HBSettings(harmonics=int(harmonics), nu=int(solver.subharmonic), samples=int(solver.time_samples))
-
-
-def stability_row(cfg, contact_ratio: float, speeds_rpm) -> np.ndarray:
-    """One row of the map: ``max |multiplier|`` over `speeds_rpm` at one contact ratio.
-
-    The unit of work of ``hbgear stability-map`` (one task per contact ratio when distributed).
-    Linear models use the batched exact monodromy; others harmonic balance + Hill (``nan``
-    where harmonic balance does not converge).
-    """
-    model = model_at_contact_ratio(cfg, contact_ratio)
-    omegas = np.asarray(speeds_rpm, dtype=float) * (2.0 * np.pi / 60.0)
-    return _row_for_model(model, omegas, _settings(cfg))
-
-
-def stability_map(cfg_or_models, speeds_rpm, contact_ratios=None) -> np.ndarray:
-    """``max |multiplier|`` over contact ratio x speed for any model (see :func:`stability_row`).
-
-    **Returns:** array ``(len(contact_ratios), len(speeds_rpm))``.
-    """
-    models, _ = _models(cfg_or_models, contact_ratios)
-    omegas = np.asarray(speeds_rpm, dtype=float) * (2.0 * np.pi / 60.0)
-    settings = _settings(cfg_or_models) if not isinstance(cfg_or_models, Sequence) else _HBSettings()
-    return np.stack([_row_for_model(m, omegas, settings) for m in models])

@@ -68,7 +68,7 @@ class GearPairModel:
     - `backlash_m`: total backlash ``2b`` [m] (used when `contact` is ``"backlash"``).
     - `ste_amplitude_m`, `ste_phase_rad`: unloaded static transmission error per mesh order.
     - `torque_pinion_Nm`: input torque ``T_p`` [N m].
-    - `friction`: a :class:`~hbgear.friction.FrictionLaw`.
+    - `friction`: a :class:`~hbgear.gear.friction.FrictionLaw`.
     - `face_width_m`: face width [m] (load per unit width for load-dependent laws).
     - `spring_stiffness_ratio`: ``k_mean R_bg^2 / k_b`` [-]; `spring_damping_ratio`: damping
       ratio of the soft output mode [-].
@@ -402,7 +402,7 @@ class GearPairModel:
         including the mean friction torques of the quasi-static state (MODEL.md section 4):
         ``k_u u_s = < T_p/R_bp + T_fp/R_bp + T_fg/R_bg - T_g/R_bg >``. Zero unless "spring".
         """
-        from .quadrature import mesh_period_rule
+        from ..engine.quadrature import mesh_period_rule
 
         s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
         _, _, wm = self.speeds(omega_pinion)

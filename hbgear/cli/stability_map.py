@@ -2,7 +2,7 @@
 
 Grid from ``[map]`` (``k_max`` and ``k_min`` held as the contact ratio varies). One unit of
 work is one contact ratio (a row of the map, :func:`compute_row`): linear models (LTI, LTV A
-or B) use the batched exact monodromy of :mod:`hbgear.stability`, others harmonic balance +
+or B) use the batched exact monodromy of :mod:`hbgear.engine.floquet`, others harmonic balance +
 Hill's method at every speed.
 
 Runs locally by default. With ``map.scheduler`` in the config or ``--scheduler ADDRESS``, the
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import Command, register
+from . import Command, register
 from ..errors import ConfigError
-from ..io import save_figure_atomic, to_jsonable, write_csv_atomic, write_text_atomic
+from ..outputs.io import save_figure_atomic, to_jsonable, write_csv_atomic, write_text_atomic
 
 __all__ = ["STABILITY_MAP", "compute_row", "grid", "plot_stability_map", "run_map"]
 
@@ -51,7 +51,7 @@ def grid(config) -> tuple[np.ndarray, np.ndarray]:
 
 def compute_row(config, contact_ratio: float, speeds_rpm) -> np.ndarray:
     """max |multiplier| at every speed for one contact ratio (the task sent to workers)."""
-    from ..stability import stability_row
+    from ..gear.maps import stability_row
 
     return np.asarray(stability_row(config, float(contact_ratio), np.asarray(speeds_rpm, float)), dtype=float)
 

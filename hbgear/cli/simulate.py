@@ -1,8 +1,8 @@
 """`hbgear simulate CONFIG --speed RPM [--cycles N] [--march]`: time integration to steady state.
 
-Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
+Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.outputs.io`:
 
-- `summary.json`: `speed_rpm`, the :data:`hbgear.metrics.SUMMARY_KEYS`, `cycles_integrated`,
+- `summary.json`: `speed_rpm`, the :data:`hbgear.gear.readouts.SUMMARY_KEYS`, `cycles_integrated`,
   `period_mesh_cycles`, `steady_measure`, `output_torque_Nm` (``"reaction"`` boundary: the mean
   output torque fixed by periodicity), the integrator settings, a model description and the
   configuration (TOML keys and units);
@@ -13,7 +13,7 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.io`:
 - `timeseries.png`: DTE, mesh force and per-pair normal and friction forces.
 
 With `--march` exactly `--cycles` mesh cycles are integrated from the static state with no
-steady-state test (:func:`hbgear.simulate.march`: transients, growth in unstable zones): the
+steady-state test (:func:`hbgear.gear.simulate.march`: transients, growth in unstable zones): the
 summary keys are then means over the last cycle (`"mode": "march"`, plus
 `dte_p2p_growth_per_cycle` over the last up to 20 cycles), the time series holds the last two
 cycles, and `cycles.csv` the per-cycle `cycle, dte_mean_um, dte_rms_um, dte_p2p_um`.
@@ -26,10 +26,10 @@ import math
 import numpy as np
 
 from ..build import build_model
-from ..cli import Command, positive_float, positive_int, register
-from ..io import save_figure_atomic, write_csv_atomic, write_json_atomic
-from ..model import PAIR_SLOTS
-from ..simulate import march, simulate
+from . import Command, positive_float, positive_int, register
+from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
+from ..gear.model import PAIR_SLOTS
+from ..gear.simulate import march, simulate
 
 __all__ = ["SIMULATE", "run", "timeseries_table", "plot_timeseries"]
 
@@ -69,7 +69,7 @@ def model_description(model) -> dict:
 
 
 def timeseries_table(res):
-    """Header and rows of `timeseries.csv` from a :class:`~hbgear.simulate.TimeResponse`."""
+    """Header and rows of `timeseries.csv` from a :class:`~hbgear.gear.simulate.TimeResponse`."""
     header = ["time_s", "mesh_phase", "dte_um", "dte_velocity_m_per_s", "mesh_force_N"]
     columns = [res.t, res.s, 1e6 * res.q[0], res.qd[0], res.mesh_force]
     for k in range(PAIR_SLOTS):
@@ -115,7 +115,7 @@ def plot_timeseries(res, title=None):
 
 
 def _last_cycles(model, rec, count: int = 2):
-    """The last `count` cycles of a :class:`~hbgear.simulate.MarchRecord` as the fields
+    """The last `count` cycles of a :class:`~hbgear.gear.simulate.MarchRecord` as the fields
     :func:`timeseries_table` and :func:`plot_timeseries` read."""
     from types import SimpleNamespace
 

@@ -1,0 +1,183 @@
+r"""Floquet stability of periodic solutions: classification of multipliers and Hill's method.
+
+A periodic solution ``q*(t)`` of ``M q'' = Q(s, q, q')`` is stable iff every Floquet multiplier
+of the linearised equations ``M y'' = Q_q(t) y + Q_qd(t) y'`` has modulus below one (trivial
+multipliers of a free coordinate excepted).
+
+**Hill's method** (:func:`hill_multipliers`, :func:`hill_multipliers_batch`) on the
+harmonic-balance Jacobian: of the quadratic eigenproblem ``(J + lam D1 + lam^2 D2) v = 0``,
+whose ``2 n (2H+1)`` eigenvalues come in families of copies ``lam + i k w`` (one multiplier
+each), the ``2n`` members whose eigenvectors are most concentrated on the central harmonics
+are kept (Lazarus & Thomas 2010); multipliers ``exp(lam T)``, ``T = 2 pi / w``. By default
+only those central eigenpairs are computed (refined from a low-harmonic sub-problem, batched
+over points, see :mod:`hbgear.engine.hill`); ``method="dense"`` takes all eigenpairs of the
+companion linearisation instead, with the same result.
+
+Trivial multipliers: a system with a ``free_mean_dof`` (e.g. the gear pair's ``"reaction"``
+boundary) has no restoring force on that coordinate, so its linearisation has the exponent 0
+twice (a Jordan block: ``u = const``, ``u = t``); those (at most two, within
+:data:`TRIVIAL_TOL` of 0) are dropped.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "TRIVIAL_TOL",
+    "StabilityInfo",
+    "classify",
+    "hill_exponents",
+    "hill_exponents_batch",
+    "hill_multipliers",
+    "hill_multipliers_batch",
+    "is_stable",
+    "max_abs_multiplier",
+    "most_negative_real",
+    "period_doubling",
+]
+
+#: Multipliers within this distance of 1 (exponents within ``TRIVIAL_TOL/(2 pi)`` of 0, in
+#: units of the base frequency) count as the trivial rigid-body ones of a free coordinate.
+TRIVIAL_TOL = 1e-5
+
+
+# ============================================================================ classification
+
+
+class StabilityInfo(NamedTuple):
+    """Summary of a set of Floquet multipliers.
+
+    **Fields:** `max_abs` (largest modulus); `stable` (see :func:`is_stable`); `kind`: ``"stable"``,
+    ``"period-doubling"`` (a real multiplier below -1: continue the ``nu = 2`` branch),
+    ``"fold"`` (a real multiplier above +1) or ``"secondary-hopf"`` (a complex pair outside).
+    """
+
+    max_abs: float
+    stable: bool
+    kind: str
+
+
+def max_abs_multiplier(multipliers) -> float:
+    """``max |mu_i|`` (``nan`` for an empty or non-finite set)."""
+    m = np.asarray(multipliers)
+    if m.size == 0 or not np.all(np.isfinite(m)):
+        return float("nan")
+    return float(np.max(np.abs(m)))
+
+
+def is_stable(multipliers, tol: float = 1e-9) -> bool:
+    """``True`` iff every multiplier has ``|mu| <= 1 + tol`` (the trivial ones already dropped).
+
+    The small tolerance keeps a neutrally stable mode (exactly on the unit circle up to
+    rounding, e.g. an undamped model) from being reported unstable.
+    """
+    value = max_abs_multiplier(multipliers)
+    return bool(np.isfinite(value) and value <= 1.0 + tol)
+
+
+def period_doubling(multipliers, tol: float = 1e-9) -> bool:
+    """``True`` iff a real multiplier lies below ``-1 - tol`` (it left through -1).
+
+    The caller should then continue the sub-harmonic branch (``nu = 2``, MODEL.md section 6).
+    "Real" means ``|Im mu| <= 1e-6 |mu|`` (a complex pair that collided on the negative real axis
+    becomes real there).
+    """
+    return bool(most_negative_real(multipliers) < -1.0 - tol)
+
+
+def most_negative_real(multipliers) -> float:
+    """The most negative real multiplier (``nan`` if none); "real" as in :func:`period_doubling`."""
+    m = np.asarray(multipliers)
+    negative = m.real[(np.abs(m.imag) <= 1e-6 * np.maximum(np.abs(m), 1.0)) & (m.real < 0)]
+    return float(np.min(negative)) if negative.size else float("nan")
+
+
+def classify(multipliers, tol: float = 1e-9) -> StabilityInfo:
+    """Stable, or how the dominant multiplier left the unit circle."""
+    m = np.asarray(multipliers)
+    value = max_abs_multiplier(m)
+    if is_stable(m, tol):
+        return StabilityInfo(value, True, "stable")
+    if not np.isfinite(value):
+        return StabilityInfo(value, False, "unknown")
+    lead = m[np.argmax(np.abs(m))]
+    if abs(lead.imag) <= 1e-6 * abs(lead):
+        return StabilityInfo(value, False, "period-doubling" if lead.real < 0 else "fold")
+    return StabilityInfo(value, False, "secondary-hopf")
+
+
+# ============================================================================ Hill's method
+
+
+def _zero_tol(system, drop_trivial: bool):
+    """Exponent tolerance (``mu = lam / w``) of the trivial pair, or ``None`` when none is dropped."""
+    if drop_trivial and getattr(system, "free_mean_dof", None) is not None:
+        return TRIVIAL_TOL / (2.0 * np.pi)
+    return None
+
+
+def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
+                         method: str = "auto"):
+    """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
+
+    Small problems get their Hill matrices from one jitted, vmapped call per chunk of points;
+    the refinement runs stacked over all points (:func:`hbgear.engine.hill.refined_central_batch`).
+    On the Duffing benchmark (H = 7) this is several times cheaper per point than one call per
+    point.
+    """
+    from .hill import central_exponents, hill_quadratic
+
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    if ps.size == 0:
+        return []
+    a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
+    mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
+                            copy_tol=copy_tol, method=method)
+    out = []
+    for mu, wk in zip(mus, w):
+        mult = np.exp(2.0 * np.pi * mu)
+        order = np.argsort(-np.abs(mult), kind="stable")
+        out.append((mu[order] * wk, mult[order]))
+    return out
+
+
+def hill_exponents(hb, z, p, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6, method: str = "auto"):
+    """The ``2n`` Floquet exponents picked from the Hill spectrum, and their multipliers.
+
+    **Returns:** ``(lam, mult)``: exponents [1/s] and multipliers ``exp(lam T)`` over the base
+    period ``T = 2 pi / w`` (``w = w_mesh / nu``), sorted by decreasing ``|mult|``.
+
+    Of every family of copies ``lam + i k w`` of the quadratic eigenproblem
+    ``(J + mu w D1 + mu^2 w^2 D2) v = 0`` (``lam = mu w``) the member whose eigenvector is most
+    concentrated on the central harmonics is kept (:mod:`hbgear.engine.hill`). `method`: ``"dense"``
+    (all eigenpairs of the companion linearisation) or ``"refined"`` = ``"auto"`` (the central
+    eigenpairs only, by inverse iteration seeded from the low harmonics; the dense way where
+    that is not confident): the same exponents either way (to ~1e-13 in the tests).
+    With the reaction boundary the (at most two) exponents within ``TRIVIAL_TOL`` of 0 are
+    dropped.
+    """
+    return hill_exponents_batch(hb, np.asarray(z)[None], [p], system, drop_trivial=drop_trivial,
+                                copy_tol=copy_tol, method=method)[0]
+
+
+def hill_multipliers(hb, z, p, system, **kwargs) -> np.ndarray:
+    """Floquet multipliers of a harmonic-balance solution by Hill's method.
+
+    **Arguments:** `hb`: the :class:`~hbgear.engine.hb.HarmonicBalance` used to solve; `z`: its scaled
+    unknowns (``PeriodicSolution.z``); `p`: the parameter (pinion speed [rad/s] for a
+    ``GearSystem`` in speed); `system`: the system. Keywords go to :func:`hill_exponents`.
+
+    **Returns:** the ``2n`` multipliers (less the trivial pair of the reaction boundary) over
+    the base period ``2 pi nu / w_mesh``, sorted by decreasing modulus.
+    """
+    return hill_exponents(hb, z, p, system, **kwargs)[1]
+
+
+def hill_multipliers_batch(hb, zs, ps, system, **kwargs) -> list[np.ndarray]:
+    """:func:`hill_multipliers` at many points of one problem (see :func:`hill_exponents_batch`)."""
+    return [mult for _, mult in hill_exponents_batch(hb, zs, ps, system, **kwargs)]
+
+

@@ -1,0 +1,6 @@
+"""The spur-gear pair with tooth friction (MODEL.md), as a system of :mod:`hbgear.engine`.
+
+Geometry, friction laws, the model and its adaptor to the engine, exact and variational
+monodromy, time integration and the read-outs a gear engineer looks at. It imports the engine
+and nothing from the config, the outputs or the CLI.
+"""

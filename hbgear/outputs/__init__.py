@@ -1,0 +1,1 @@
+"""Files a run writes: atomic CSV/JSON/figure writes (:mod:`.io`)."""
