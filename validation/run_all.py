@@ -836,11 +836,9 @@ def check_fig11():
 def check_fig13():
     import importlib
 
-    from hbgear.engine import floquet
 
     from hbgear.gear import maps as gear_maps
 
-    from hbgear.gear import monodromy
     from hbgear.config import load_config
 
     mod = importlib.import_module("validation.fig13_stability_map")
