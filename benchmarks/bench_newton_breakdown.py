@@ -171,7 +171,7 @@ def prototypes(model, hb, system):
 
     w = rpm_to_rad_s(13000.0)
     z = jnp.asarray(solve_periodic(model, w, harmonics=H, samples=SAMPLES, tolerance=TOL).z)
-    quad = hb.quadrature(system)[:3] + (None,)  # the full construction (no frozen blocks), as before the caching
+    quad = hb.prepare(system)._replace(frozen=None)  # the full construction (no frozen blocks), as before the caching
     n, B = hb.ndof, hb.block
     xs, fs = system.displacement_scale, system.force_scale
     out = {}
@@ -179,7 +179,7 @@ def prototypes(model, hb, system):
     out["residual"] = median_ms(lambda: hb.residual(z, w, system))
     out["(R, J)"] = median_ms(lambda: hb.residual_and_jacobian(z, w, system))
     out["(R, J, dR/dp)"] = median_ms(lambda: hb.residual_and_jacobians(z, w, system))
-    prepared = hb.quadrature(system)  # with the speed-independent pieces (what hbgear uses)
+    prepared = hb.prepare(system)  # with the speed-independent pieces (what hbgear uses)
     response_jit = jax.jit(lambda x, p, s: hb._linear_response(x, p, s, prepared))
     out["L x - F from the frozen pieces (hbgear now)"] = median_ms(lambda: response_jit(z * xs, w, system))
     forcing_jit = jax.jit(lambda p, s: hb._forcing(s, p, prepared))

@@ -177,9 +177,9 @@ def test_frozen_operator_and_forcing_pieces_equal_the_full_construction():
 
     model = model_with("friction.model=NLTV", "friction.law=arctan")
     hb, system = HarmonicBalance(model.ndof, 8, 1, 64), GearSystem(model)
-    quad = hb.quadrature(system)
-    assert quad[3] is not None and quad[3][4] is not None
-    full = quad[:3] + (None,)
+    quad = hb.prepare(system)
+    assert quad.frozen is not None and quad.frozen.forcing is not None
+    full = quad._replace(frozen=None)
     for rpm in (2000.0, 9000.0, 13400.0, 21000.0):
         w = rpm_to_rad_s(rpm)
         fast, slow = jax.jvp(lambda p: hb.linear_operator(system, p, quad), (w,), (1.0,)), jax.jvp(
@@ -208,8 +208,8 @@ def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
     honest, liar = GearSystem(model), ClaimsAffine(model)
     assert not honest.forcing_affine_in_frequency
     hb = HarmonicBalance(model.ndof, 8, 1, 64)
-    quad = hb.quadrature(liar)
-    assert quad[3] is not None and quad[3][4] is None
+    quad = hb.prepare(liar)
+    assert quad.frozen is not None and quad.frozen.forcing is None
     z, w = np.linspace(-1, 1, hb.size) * 1e-2, rpm_to_rad_s(13000.0)
     np.testing.assert_allclose(hb.residual(jnp.asarray(z), w, liar), hb.residual(jnp.asarray(z), w, honest),
                                rtol=0, atol=1e-13)
@@ -224,21 +224,18 @@ def test_frozen_pieces_first_asked_for_under_a_trace_are_concrete_and_equal():
 
     model = model_with("friction.model=NLTV", "friction.law=arctan")
     hb, system = HarmonicBalance(model.ndof, 6, 1, 64), GearSystem(model)
-    hb_module._FROZEN_CACHE.clear()
-    hb_module._PREPARED.clear()
+    hb_module._FROZEN.clear()
     seen = []
 
     def inside(x):
-        quad = hb.quadrature(system)
-        seen.append(quad[3])
+        seen.append(hb.prepare(system).frozen)
         return x
 
     jax.vmap(inside)(jnp.ones(2))
     assert seen and seen[0] is not None
     assert not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(seen[0]))
-    hb_module._FROZEN_CACHE.clear()
-    hb_module._PREPARED.clear()
-    outside = hb.quadrature(system)[3]
+    hb_module._FROZEN.clear()
+    outside = hb.prepare(system).frozen
     for got, want in zip(jax.tree_util.tree_leaves(seen[0]), jax.tree_util.tree_leaves(outside)):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
 

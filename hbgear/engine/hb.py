@@ -25,8 +25,10 @@ The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from functools import lru_cache, partial
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -37,7 +39,64 @@ from .quadrature import mesh_period_rule
 
 jax.config.update("jax_enable_x64", True)
 
-__all__ = ["HarmonicBalance", "residual_functions"]
+__all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions"]
+
+
+class ForcingPieces(NamedTuple):
+    """The forcing as ``F_hat(p) = at_a + (w - w_a) slope + e_mean (F(s_*; p) - point_a - (w - w_a)
+    point_slope)`` (:meth:`HarmonicBalance._forcing_pieces`); ``w`` the excitation frequency."""
+
+    at_a: Any
+    slope: Any
+    w_a: Any
+    point_a: Any
+    point_slope: Any
+    s_star: Any
+
+
+class FrozenOperator(NamedTuple):
+    """``L(w) = a0 + w a1 + w^2 a2`` and ``C_conv`` (flattened, SI) with the forcing pieces, when
+    the coefficients do not depend on the parameter (:meth:`HarmonicBalance._frozen_operator`)."""
+
+    a0: Any
+    a1: Any
+    a2: Any
+    damping: Any
+    forcing: ForcingPieces | None
+
+
+class JumpLayout(NamedTuple):
+    """Where and how the jumps of ``Q_nl`` are taken out of the AFT samples
+    (:meth:`HarmonicBalance._jump_layout`): mesh phases just after and just before each candidate
+    ``(2C,)``, synthesis rows ``(C, 2H+1)``, ``1/multiplicity`` ``(C,)``, ``B_hat_c - P B_c``
+    ``(C, 2H+1)``."""
+
+    sides: Any
+    at_c: Any
+    weight: Any
+    delta: Any
+
+
+class Prepared(NamedTuple):
+    """What a discretisation needs of a system besides its parameters, built once by
+    :meth:`HarmonicBalance.prepare` and passed to every evaluation (a pytree: it goes into
+    compiled functions as an argument).
+
+    **Fields:** `nodes` ``(n,)`` mesh phases of the quadrature rule; `kernel_cos`, `kernel_sin`
+    ``(R+1, n)`` its Fourier kernel with the weights folded in; `frozen` the parameter-independent
+    operator (or ``None``); `jumps` the jump layout (or ``None``: built in the trace).
+    """
+
+    nodes: Any
+    kernel_cos: Any
+    kernel_sin: Any
+    frozen: FrozenOperator | None = None
+    jumps: JumpLayout | None = None
+
+    @property
+    def rule(self):
+        """``(nodes, kernel_cos, kernel_sin)``."""
+        return self.nodes, self.kernel_cos, self.kernel_sin
 
 
 @dataclass(frozen=True)
@@ -70,62 +129,54 @@ class HarmonicBalance:
     def base_frequency(self, system, p):
         return system.excitation_frequency(p) / self.nu
 
-    # -- the affine periodic part, exactly ----------------------------------------------------
-    def quadrature(self, system, p=1.0):
-        """Nodes and Fourier kernel of the mesh-period rule for this system's breakpoints.
+    # -- the prepared operator: built once per system, passed along -------------------------
+    @property
+    def max_mesh_order(self) -> int:
+        """Highest mesh order ``R = ceil(2H / nu)`` whose coefficients the operator needs."""
+        return -(-2 * self.harmonics // self.nu)
 
-        Computed once per geometry in numpy (the breakpoints depend on the contact ratio and
-        the contact path, not on the parameter) and reused: evaluating ``exp(-2 pi i r s)`` at
-        thousands of nodes would otherwise dominate every residual.
+    def prepare(self, system, p=1.0) -> Prepared:
+        """The :class:`Prepared` pieces of this discretisation for `system`.
 
-        **Returns:** ``(s, kernel_cos, kernel_sin, frozen, jump_layout)``: shapes ``(n,)``,
-        ``(R+1, n)``, ``(R+1, n)`` with the weights folded in, ``R = ceil(2H/nu)``; the
-        parameter-independent operator pieces of :meth:`_frozen_blocks` and the jump layout of
-        :meth:`_frozen_jump_layout`, each ``None`` when the system does not allow them.
+        The mesh-period rule and its Fourier kernel depend on the breakpoints only (for the gear
+        pair: the contact ratio and the contact path), so they are computed once in numpy and
+        reused; evaluating ``exp(-2 pi i r s)`` at thousands of nodes would otherwise dominate
+        every residual. When the system declares parameter-independent coefficients, the
+        operator pieces (:meth:`_frozen_operator`) and the jump layout (:meth:`_frozen_jumps`)
+        come with it. The pieces are cached on their content (bounded); a caller that loops
+        (Newton, continuation) prepares once and passes the result to every evaluation.
+
+        Under a trace of the system itself (an outer ``jit``/``vmap`` over systems) the rule is
+        built in the trace and nothing is frozen.
         """
-        hit = _PREPARED.get((self, id(system)))
-        if hit is not None and hit[0] is system:  # the same system object as last time
-            return hit[1]
         if _has_tracer((system, p)):
-            return self._prepare(system, p)
+            s, w = mesh_period_rule(system.breakpoints(p, jnp), self.max_mesh_order, jnp)
+            phase = 2 * np.pi * jnp.arange(self.max_mesh_order + 1)[:, None] * s[None]
+            return Prepared(s, jnp.cos(phase) * w, jnp.sin(phase) * w)
         # concrete arrays even when first asked for inside a trace (a compiled caller's first
-        # call): the caches below must never hold tracers
+        # call): the caches must never hold tracers
         with jax.ensure_compile_time_eval():
-            quad = self._prepare(system, p)
-        if not isinstance(quad[0], jax.core.Tracer):
-            if len(_PREPARED) > 16:
-                _PREPARED.clear()
-            _PREPARED[(self, id(system))] = (system, quad)  # holds the object: its id stays unique
-        return quad
+            rule = _RULES.get_or_make((_breakpoint_key(system, p), self.max_mesh_order),
+                                      lambda: self._rule(system, p))
+            return Prepared(*rule, self._frozen_operator(system, p, rule), self._frozen_jumps(system))
 
-    def _prepare(self, system, p):
-        max_mesh_order = -(-2 * self.harmonics // self.nu)
-        if _has_tracer((system, p)):  # a traced system (under an outer jit/vmap): build in-trace
-            s, w = mesh_period_rule(system.breakpoints(p, jnp), max_mesh_order, jnp)
-            phase = 2 * np.pi * jnp.arange(max_mesh_order + 1)[:, None] * s[None]
-            return s, jnp.cos(phase) * w, jnp.sin(phase) * w, None, None
-        breakpoints = _breakpoint_key(system, p)
-        key = (breakpoints, max_mesh_order)
-        if key not in _QUADRATURE_CACHE:
-            if len(_QUADRATURE_CACHE) > 64:
-                _QUADRATURE_CACHE.clear()
-            s, w = mesh_period_rule(np.asarray(breakpoints), max_mesh_order)
-            phase = 2 * np.pi * np.outer(np.arange(max_mesh_order + 1), s)
-            _QUADRATURE_CACHE[key] = tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
-        quad = _QUADRATURE_CACHE[key]
-        return quad + (self._frozen_blocks(system, p, quad), self._frozen_jump_layout(system))
+    def _rule(self, system, p):
+        """``(nodes, kernel_cos, kernel_sin)`` of the mesh-period rule, weights folded in (device arrays)."""
+        s, w = mesh_period_rule(np.asarray(_breakpoint_key(system, p)), self.max_mesh_order)
+        phase = 2 * np.pi * np.outer(np.arange(self.max_mesh_order + 1), s)
+        return tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
 
-    def _frozen_jump_layout(self, system):
+    def _frozen_jumps(self, system) -> JumpLayout | None:
         """The jump layout of :meth:`_sample_points` (device arrays) when the breakpoints do not
-        depend on the parameter, else ``None``. Given with the quadrature, a compiled caller that
-        takes the system as an argument does not rebuild it (a projection of ``2C`` sawtooth
-        signals) at every residual evaluation."""
-        if not getattr(system, "coefficients_independent_of_parameter", False):
+        depend on the parameter, else ``None``. Given with the prepared pieces, a compiled caller
+        that takes the system as an argument does not rebuild it (a projection of ``2C``
+        sawtooth signals) at every residual evaluation."""
+        if not system.coefficients_independent_of_parameter:
             return None
-        return tuple(jnp.asarray(a) for a in self._jump_layout(system, 1.0))
+        return JumpLayout(*(jnp.asarray(a) for a in self._jump_layout(system, 1.0)))
 
-    def _frozen_blocks(self, system, p, quad):
-        """The speed-independent pieces of the linear operator, when the system declares them so.
+    def _frozen_operator(self, system, p, rule) -> FrozenOperator | None:
+        """The parameter-independent pieces of the linear operator, when the system declares them so.
 
         For a speed sweep of the gear pair ``M`` and the periodic stiffness and damping
         coefficients do not depend on the speed (only the forcing and ``D(w) = w D_1`` do), so
@@ -133,26 +184,25 @@ class HarmonicBalance:
             L(w) = M (x) D^2 + K_conv + C_conv (I (x) D) = A_0 + w A_1 + w^2 A_2,
             A_0 = K_conv,  A_1 = C_conv (I (x) D_1),  A_2 = M (x) D_1^2,
 
-        are built once per system and each evaluation combines three matrices (or applies them
-        to ``x``) instead of rebuilding ``L``.
+        are built once per system (cached on the system's content) and each evaluation combines
+        three matrices (or applies them to ``x``) instead of rebuilding ``L``.
 
-        **Returns:** ``None`` or ``(A_0, A_1, A_2, C_conv, forcing)``, the matrices flattened
-        ``(size, size)`` in SI, ``forcing`` the pieces of :meth:`_forcing_pieces` or ``None``.
+        **Returns:** ``None`` or a :class:`FrozenOperator`, matrices flattened ``(size, size)`` in SI.
         """
-        if not getattr(system, "coefficients_independent_of_parameter", False):
+        if not system.coefficients_independent_of_parameter:
             return None
         leaves, treedef = jax.tree_util.tree_flatten(system)
-        key = (self, treedef, tuple(np.asarray(leaf).tobytes() for leaf in leaves), quad[0].shape)
-        if key not in _FROZEN_CACHE:
-            if len(_FROZEN_CACHE) > 64:
-                _FROZEN_CACHE.clear()
-            # in numpy: a one-off computation of a few ms, which compiled for ~2 s in XLA
-            quad_np = tuple(np.asarray(a) for a in quad[:3]) + (None,)
-            blocks = tuple(jnp.asarray(b) for b in self._blocks(system, p, quad_np))
-            _FROZEN_CACHE[key] = blocks + (self._forcing_pieces(system, quad_np),)
-        return _FROZEN_CACHE[key]
+        key = (self, treedef, tuple(np.asarray(leaf).tobytes() for leaf in leaves), rule[0].shape)
 
-    def _forcing_pieces(self, system, quad):
+        def make():
+            # in numpy: a one-off computation of a few ms, which compiled for ~2 s in XLA
+            rule_np = tuple(np.asarray(a) for a in rule)
+            blocks = tuple(jnp.asarray(b) for b in self._blocks(system, p, rule_np))
+            return FrozenOperator(*blocks, self._forcing_pieces(system, rule_np))
+
+        return _FROZEN.get_or_make(key, make)
+
+    def _forcing_pieces(self, system, rule) -> ForcingPieces | None:
         r"""Pieces of the forcing vector when it is affine in the excitation frequency up to a
         constant (in ``s``) term, ``F(s; p) = Fbar(p) + A(s) + w_exc(p) B(s)`` (the system says
         so with ``forcing_affine_in_frequency``; checked here at a third parameter value).
@@ -165,25 +215,24 @@ class HarmonicBalance:
         exactly: the harmonics are affine in ``w``, and the point value gives ``Fbar(p)``. A call
         then evaluates ``F`` at one node instead of at every quadrature node.
 
-        **Returns:** ``None`` or ``(F_hat_a, dF_hat/dw, w_a, f_a, df/dw, s_*)``.
+        **Returns:** ``None`` or the :class:`ForcingPieces` ``(F_hat_a, dF_hat/dw, w_a, f_a, df/dw, s_*)``.
         """
-        if not getattr(system, "forcing_affine_in_frequency", False):
+        if not system.forcing_affine_in_frequency:
             return None
         # from p_a = 1, p_b = 3, checked against the quadrature at p_c = 2
-        quad = quad[:3] + (False,)  # forcing probe only
-        s_star = quad[0][:1]
+        s_star = rule[0][:1]
 
         def at(p):
-            forcing, _, _ = self._periodic_coefficients(system, p, quad, np)
+            forcing, _, _ = self._periodic_coefficients(system, p, rule, np, forcing_only=True)
             real = fourier.coefficients_to_real(forcing, self.harmonics, np).reshape(self.size)
             return real, self._point_forcing(system, p, s_star, np), system.excitation_frequency(p)
 
         (f_a, pt_a, w_a), (f_b, pt_b, w_b), (f_c, _, _) = at(1.0), at(3.0), at(2.0)
-        pieces = (f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
+        pieces = ForcingPieces(f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
         error = np.max(np.abs(self._combined_forcing(system, 2.0, pieces, np) - f_c))
         if not (np.isfinite(error) and error <= 1e-11 * (np.max(np.abs(f_c)) + 1e-300)):
             return None  # the declared structure does not hold: full quadrature every call
-        return tuple(jnp.asarray(a) for a in pieces)
+        return ForcingPieces(*(jnp.asarray(a) for a in pieces))
 
     def _point_forcing(self, system, p, s_star, xp=jnp):
         zero = xp.zeros((self.ndof, 1))
@@ -197,10 +246,10 @@ class HarmonicBalance:
         mean[:: self.block] = 1.0  # the a_0 slot of each coordinate
         return f_a + dw * d_hat + xp.repeat(mean_fix, self.block) * mean
 
-    def _blocks(self, system, p, quad):
-        """``(A_0, A_1, A_2, C_conv)`` of :meth:`_frozen_blocks` (numpy)."""
+    def _blocks(self, system, p, rule):
+        """``(A_0, A_1, A_2, C_conv)`` of :meth:`_frozen_operator` (numpy)."""
         H = self.harmonics
-        _, stiffness, damping = self._periodic_coefficients(system, p, quad, np)
+        _, stiffness, damping = self._periodic_coefficients(system, p, rule, np)
         k_conv = fourier.convolution_matrix(stiffness, H, np)
         c_conv = fourier.convolution_matrix(damping, H, np)
         d1 = fourier.derivative_matrix(H, 1.0, np)
@@ -209,18 +258,17 @@ class HarmonicBalance:
         flat = lambda b: self._flatten(b, np)  # noqa: E731
         return flat(k_conv), flat(c_conv @ d1[None, None]), flat(a2), flat(c_conv)
 
-    def _periodic_coefficients(self, system, p, quad, xp=jnp):
+    def _periodic_coefficients(self, system, p, rule, xp=jnp, forcing_only=False):
         """Complex base-harmonic coefficients ``(F, K, C)`` of ``Q_lin = F - K q - C q'``.
 
         ``Q_lin`` is affine in ``(q, q')``, so probing it at ``0`` and at unit vectors gives its
         coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes
-        (a loop over them in numpy).
+        (a loop over them in numpy). `rule`: ``(nodes, kernel_cos, kernel_sin)``;
+        `forcing_only`: probe at 0 alone (the stiffness and damping returned are then empty).
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
-        s, kernel_cos, kernel_sin, frozen = quad[:4]
-        eye = xp.eye(n)
-        if frozen is not None:  # only the forcing is needed (frozen blocks, or False): probe at 0 alone
-            eye = xp.zeros((0, n))
+        s, kernel_cos, kernel_sin = rule[:3]
+        eye = xp.zeros((0, n)) if forcing_only else xp.eye(n)
         probes_q = xp.concatenate([xp.zeros((1, n)), eye, xp.zeros_like(eye)])
         probes_v = xp.concatenate([xp.zeros((1, n)), xp.zeros_like(eye), eye])
         ones = xp.ones_like(s)
@@ -239,15 +287,15 @@ class HarmonicBalance:
         damping = xp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
         return forcing, stiffness, damping
 
-    def linear_operator(self, system, p, quad=None):
+    def linear_operator(self, system, p, prepared=None):
         """``(L, F, C_conv)`` in SI: ``L = M D^2 + K_conv + C_conv D``, forcing vector ``F``."""
         H = self.harmonics
-        quad = self.quadrature(system) if quad is None else quad
-        if quad[3] is not None:
-            a0, a1, a2, c_flat, _ = quad[3]
+        prepared = self.prepare(system) if prepared is None else prepared
+        frozen = prepared.frozen
+        if frozen is not None:
             w = self.base_frequency(system, p)
-            return a0 + w * a1 + w**2 * a2, self._forcing(system, p, quad), c_flat
-        forcing, stiffness, damping = self._periodic_coefficients(system, p, quad)
+            return frozen.a0 + w * frozen.a1 + w**2 * frozen.a2, self._forcing(system, p, prepared), frozen.damping
+        forcing, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
         forcing = fourier.coefficients_to_real(forcing, H, jnp).reshape(self.size)
         k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
         c_conv = fourier.convolution_matrix(damping, H, jnp)
@@ -256,22 +304,21 @@ class HarmonicBalance:
         op = mass[:, :, None, None] * (d @ d)[None, None] + k_conv + c_conv @ d[None, None]
         return self._flatten(op), forcing, self._flatten(c_conv)
 
-    def _linear_response(self, x, p, system, quad):
+    def _linear_response(self, x, p, system, prepared):
         """``L x - F`` in SI; with the frozen pieces as three matrix-vector products."""
-        if quad[3] is None:
-            lin, forcing, _ = self.linear_operator(system, p, quad)
+        frozen = prepared.frozen
+        if frozen is None:
+            lin, forcing, _ = self.linear_operator(system, p, prepared)
             return lin @ x - forcing
-        a0, a1, a2, _, _ = quad[3]
         w = self.base_frequency(system, p)
-        return a0 @ x + w * (a1 @ x) + w**2 * (a2 @ x) - self._forcing(system, p, quad)
+        return frozen.a0 @ x + w * (frozen.a1 @ x) + w**2 * (frozen.a2 @ x) - self._forcing(system, p, prepared)
 
-    def _forcing(self, system, p, quad):
+    def _forcing(self, system, p, prepared):
         """The forcing vector ``F`` (real coefficients, SI): combined from the frozen pieces when
         there are some (:meth:`_forcing_pieces`), else by quadrature."""
-        pieces = quad[3][4] if quad[3] is not None else None
-        if pieces is not None:
-            return self._combined_forcing(system, p, pieces)
-        forcing, _, _ = self._periodic_coefficients(system, p, quad)
+        if prepared.frozen is not None and prepared.frozen.forcing is not None:
+            return self._combined_forcing(system, p, prepared.frozen.forcing)
+        forcing, _, _ = self._periodic_coefficients(system, p, prepared.rule)
         return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
 
     def _flatten(self, blocks, xp=jnp):
@@ -332,14 +379,9 @@ class HarmonicBalance:
         Built once in numpy when the breakpoints cannot depend on the parameter (the system
         declares ``coefficients_independent_of_parameter``), else in the trace.
         """
-        if getattr(system, "coefficients_independent_of_parameter", False) and not _has_tracer(system):
+        if system.coefficients_independent_of_parameter and not _has_tracer(system):
             breakpoints = _breakpoint_key(system, 1.0)
-            key = (self, breakpoints)
-            if key not in _JUMP_CACHE:
-                if len(_JUMP_CACHE) > 64:
-                    _JUMP_CACHE.clear()
-                _JUMP_CACHE[key] = self._jump_layout_of(np.asarray(breakpoints), np)
-            return _JUMP_CACHE[key]
+            return _JUMPS.get_or_make((self, breakpoints), lambda: self._jump_layout_of(np.asarray(breakpoints), np))
         return self._jump_layout_of(jnp.ravel(jnp.asarray(system.breakpoints(p, jnp))), jnp)
 
     def _jump_layout_of(self, breakpoints, xp):
@@ -367,44 +409,44 @@ class HarmonicBalance:
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
         return (x.reshape(self.ndof, self.block) @ d.T).reshape(self.size)
 
-    def _residual(self, z, p, system, quad, operator=None):
+    def _residual(self, z, p, system, prepared, operator=None):
         x, extra = self._split(system, z)
         if operator is None:
-            linear = self._linear_response(x, p, system, quad)
+            linear = self._linear_response(x, p, system, prepared)
         else:
             linear = operator[0] @ x - operator[1]
-        r = linear - self._nonlinear(x, self._velocity(x, system, p), extra, p, system, _layout(quad))
+        r = linear - self._nonlinear(x, self._velocity(x, system, p), extra, p, system, prepared.jumps)
         k = system.free_mean_dof
         if k is not None:
             r = r.at[k * self.block].add(extra)
         return r / system.force_scale
 
-    # -- public entry points: the quadrature kernel is fetched outside the traced code ----------
-    # (or given: `quadrature` = self.quadrature(system) computed once by a caller that traces
+    # -- public entry points: the prepared pieces are fetched outside the traced code ----------
+    # (or given: `prepared` = self.prepare(system) computed once by a caller that traces
     # `system` itself, e.g. as an argument of a compiled continuation corrector)
-    def residual(self, z, p, system, quadrature=None):
+    def residual(self, z, p, system, prepared=None):
         """Scaled residual ``R(z; p)``, shape ``(size,)``."""
-        return self._residual_jit(z, p, system, self.quadrature(system) if quadrature is None else quadrature)
+        return self._residual_jit(z, p, system, self.prepare(system) if prepared is None else prepared)
 
-    def residual_and_jacobian(self, z, p, system):
+    def residual_and_jacobian(self, z, p, system, prepared=None):
         """``(R, dR/dz)`` at fixed ``p`` (Newton): the affine part's Jacobian is its operator."""
-        return self._residual_and_jacobian_jit(z, p, system, self.quadrature(system))
+        return self._residual_and_jacobian_jit(z, p, system, self.prepare(system) if prepared is None else prepared)
 
-    def residual_and_jacobians(self, z, p, system, quadrature=None):
+    def residual_and_jacobians(self, z, p, system, prepared=None):
         """``(R, dR/dz, dR/dp)`` (continuation)."""
         return self._residual_and_jacobians_jit(z, p, system,
-                                                self.quadrature(system) if quadrature is None else quadrature)
+                                                self.prepare(system) if prepared is None else prepared)
 
-    def hill_matrices(self, z, p, system):
+    def hill_matrices(self, z, p, system, prepared=None):
         """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.
 
         ``J = dR/dz``, ``D1 = 2 M (x) D + dR/d(velocity)``, ``D2 = M (x) I``.
         """
-        return self._hill_matrices_jit(z, p, system, self.quadrature(system))
+        return self._hill_matrices_jit(z, p, system, self.prepare(system) if prepared is None else prepared)
 
     @partial(jax.jit, static_argnums=0)
-    def _residual_jit(self, z, p, system, quad):
-        return self._residual(z, p, system, quad)
+    def _residual_jit(self, z, p, system, prepared):
+        return self._residual(z, p, system, prepared)
 
     def _nonlinear_jacobian(self, x, extra, p, system, layout=None):
         """``(T_q, T_v, I (x) D)``: ``d(P Q_nl)/dx = T_q + T_v (I (x) D)`` in SI, from the sampled
@@ -429,7 +471,7 @@ class HarmonicBalance:
         eye = jnp.eye(n)
         dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[j][:, None], qd.shape),))[1] for j in range(n)], axis=1)
         derivatives = [dv]
-        uses_q = getattr(system, "nonlinear_force_uses_displacement", True)
+        uses_q = system.nonlinear_force_uses_displacement
         if uses_q:
             dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
             derivatives.insert(0, dq)
@@ -456,14 +498,14 @@ class HarmonicBalance:
         """The sampled-derivative Jacobian is exact when ``N > 4H``."""
         return system.is_linear or self.samples > 4 * self.harmonics
 
-    def _jacobian(self, z, p, system, quad, operator):
+    def _jacobian(self, z, p, system, prepared, operator):
         """``dR/dz`` (scaled) at the linear operator ``operator = (L, F, C)`` of ``p``."""
         if not self._toeplitz_ok(system):
-            return jax.jacfwd(self._residual)(z, p, system, quad, operator)
+            return jax.jacfwd(self._residual)(z, p, system, prepared, operator)
         jac = operator[0]
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, _layout(quad))
+            t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, prepared.jumps)
             jac = jac - t_q - self._times_derivative(t_v, system, p)
         jac = jac * (system.displacement_scale / system.force_scale)
         k = system.free_mean_dof
@@ -473,21 +515,21 @@ class HarmonicBalance:
         return jac
 
     @partial(jax.jit, static_argnums=0)
-    def _residual_and_jacobian_jit(self, z, p, system, quad):
-        operator = self.linear_operator(system, p, quad)
-        return self._residual(z, p, system, quad, operator), self._jacobian(z, p, system, quad, operator)
+    def _residual_and_jacobian_jit(self, z, p, system, prepared):
+        operator = self.linear_operator(system, p, prepared)
+        return self._residual(z, p, system, prepared, operator), self._jacobian(z, p, system, prepared, operator)
 
     @partial(jax.jit, static_argnums=0)
-    def _residual_and_jacobians_jit(self, z, p, system, quad):
+    def _residual_and_jacobians_jit(self, z, p, system, prepared):
         # R and dR/dp as ONE directional derivative in p (its primal is R; a joint jacfwd would
         # push all size+1 tangents through the operator's construction), dR/dz at a fixed operator
-        r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, quad), (p,), (jnp.ones_like(p),))
-        return r, self._jacobian(z, p, system, quad, self.linear_operator(system, p, quad)), jp
+        r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
+        return r, self._jacobian(z, p, system, prepared, self.linear_operator(system, p, prepared)), jp
 
     @partial(jax.jit, static_argnums=0)
-    def _hill_matrices_jit(self, z, p, system, quad):
+    def _hill_matrices_jit(self, z, p, system, prepared):
         x, extra = self._split(system, z)
-        lin, _, c_conv = self.linear_operator(system, p, quad)
+        lin, _, c_conv = self.linear_operator(system, p, prepared)
         xs, fs = system.displacement_scale, system.force_scale
 
         if self._toeplitz_ok(system):
@@ -496,13 +538,13 @@ class HarmonicBalance:
             if system.is_linear:
                 jz, jv = lin / fs, c_conv / fs
             else:
-                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, _layout(quad))
+                t_q, t_v, _ = self._nonlinear_jacobian(x, extra, p, system, prepared.jumps)
                 jz, jv = (lin - t_q - self._times_derivative(t_v, system, p)) / fs, (c_conv - t_v) / fs
         else:
 
             def response(xx, shift):
                 v = self._velocity(xx, system, p) + shift
-                return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system, _layout(quad))) / fs
+                return (lin @ xx + c_conv @ shift - self._nonlinear(xx, v, extra, p, system, prepared.jumps)) / fs
 
             jz, jv = jax.jacfwd(response, argnums=(0, 1))(x, jnp.zeros_like(x))
         d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
@@ -516,22 +558,22 @@ def residual_functions(hb: HarmonicBalance, system):
     """``(residual_and_jacobians, residual, args)`` in the form
     :func:`~hbgear.engine.continuation.continuation` takes: ``continuation(rj, r, ..., args=args)``.
 
-    The two functions take ``(z, p, system, quadrature)`` and are the same objects for every
-    system solved with `hb`; ``args = (system, its quadrature)``. The system's parameters are
+    The two functions take ``(z, p, system, prepared)`` and are the same objects for every
+    system solved with `hb`; ``args = (system, hb.prepare(system))``. The system's parameters are
     thus arguments of the compiled corrector, not constants in it: a new system with the
     same structure (e.g. a gear pair with the same ``H``, ``N``, laws, boundary) reuses the
     compiled program, in this process and from the disk cache.
     """
-    return (*_functions_of(hb), (system, hb.quadrature(system)))
+    return (*_functions_of(hb), (system, hb.prepare(system)))
 
 
 @lru_cache(maxsize=16)
 def _functions_of(hb: HarmonicBalance):
-    def residual_and_jacobians(z, p, system, quadrature):
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system, quadrature)
+    def residual_and_jacobians(z, p, system, prepared):
+        return hb.residual_and_jacobians(jnp.asarray(z), p, system, prepared)
 
-    def residual(z, p, system, quadrature):
-        return hb.residual(jnp.asarray(z), p, system, quadrature)
+    def residual(z, p, system, prepared):
+        return hb.residual(jnp.asarray(z), p, system, prepared)
 
     return residual_and_jacobians, residual
 
@@ -540,11 +582,6 @@ def _breakpoint_key(system, p) -> tuple:
     """The system's breakpoints at `p` as a hashable key (rounded to 1e-15: equal geometries
     share their cached rules and layouts)."""
     return tuple(np.round(np.ravel(np.asarray(system.breakpoints(p, np), dtype=float)), 15))
-
-
-def _layout(quad):
-    """The quadrature's frozen jump layout, or ``None`` (a quadrature built without one)."""
-    return quad[4] if len(quad) > 4 else None
 
 
 def _jumps(values, weight):
@@ -557,7 +594,32 @@ def _has_tracer(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-_QUADRATURE_CACHE: dict = {}
-_PREPARED: dict = {}
-_FROZEN_CACHE: dict = {}
-_JUMP_CACHE: dict = {}
+class _BoundedCache:
+    """At most `size` entries keyed on content (hashable keys built from values, never ``id()``);
+    the least recently used entry leaves first."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self._data: OrderedDict = OrderedDict()
+
+    def get_or_make(self, key, make):
+        if key in self._data:
+            self._data.move_to_end(key)
+            return self._data[key]
+        value = self._data[key] = make()
+        if len(self._data) > self.size:
+            self._data.popitem(last=False)
+        return value
+
+    def clear(self) -> None:
+        self._data.clear()
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+
+#: Mesh-period rules per (breakpoints, R); frozen operators per (discretisation, system content);
+#: jump layouts per (discretisation, breakpoints).
+_RULES = _BoundedCache(64)
+_FROZEN = _BoundedCache(64)
+_JUMPS = _BoundedCache(64)

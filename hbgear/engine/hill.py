@@ -122,13 +122,13 @@ def hill_quadratic(hb, zs, ps, system, chunk: int = 32):
         fn = _BATCHED.get(hb)
         if fn is None:
             fn = _BATCHED[hb] = jax.jit(jax.vmap(hb._hill_matrices_jit, in_axes=(0, 0, None, None)))
-        quad = hb.quadrature(system)
+        prepared = hb.prepare(system)
         size = min(chunk, m)
         parts = []
         for lo in range(0, m, size):
             idx = np.minimum(np.arange(lo, lo + size), m - 1)
             keep = min(size, m - lo)
-            parts.append([np.asarray(x, dtype=float)[:keep] for x in fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, quad)])
+            parts.append([np.asarray(x, dtype=float)[:keep] for x in fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, prepared)])
         a0, d1, d2 = (np.concatenate([x[k] for x in parts]) for k in range(3))
     return a0, w[:, None, None] * d1, (w * w)[:, None, None] * d2, w
 

@@ -1,21 +1,68 @@
-r"""Periodic mechanical systems in the form the harmonic-balance engine solves.
+r"""The contract between a periodic system and the harmonic-balance engine.
 
-A system is ``M q'' = Q(s, q, q'; p)`` where ``s`` in [0, 1) is the phase of its excitation
-period ``2 pi / w_exc(p)``, ``p`` the scalar parameter being varied (a speed, a torque, ...), and
-``Q = Q_lin + Q_nl`` splits into terms affine in ``(q, q')`` with periodic coefficients
-(exact convolution) and the rest (alternating frequency-time). Protocol (duck-typed):
+A system is the second-order equation
 
-- ``ndof`` (int), ``is_linear`` (bool), ``free_mean_dof`` (int or None: a coordinate whose mean
-  is pinned to 0 and replaced by a constant force unknown ``extra`` entering ``Q``),
-- ``mass_matrix(p, xp)``, ``excitation_frequency(p)`` [rad/s], ``breakpoints(p, xp)``,
-- ``force(s, q, qd, p, part, extra, xp)``, ``displacement_scale``, ``force_scale``;
-- optional speed-ups (default False): ``coefficients_independent_of_parameter`` (``M`` and
-  the periodic stiffness and damping of ``Q_lin`` do not depend on ``p``) and
-  ``forcing_affine_in_frequency`` (``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``);
-  and (default True) ``nonlinear_force_uses_displacement`` (False: ``Q_nl`` depends on ``q'``
-  only, so its Jacobian has no displacement blocks).
+.. math::  M(p)\, q'' = Q(s, q, q'; p), \qquad Q = Q_{lin} + Q_{nl},
 
-Systems are JAX pytrees, so changing their float parameters never triggers recompilation.
+where ``q`` holds ``ndof`` coordinates, ``p`` is the scalar parameter a study varies (a speed, a
+forcing frequency, a torque, ...), and ``s = frac(w_exc(p) t / 2 pi)`` in [0, 1) is the phase of
+the explicit time dependence, whose period is ``2 pi / w_exc(p)``. ``Q_lin`` is affine in
+``(q, q')`` with ``s``-periodic coefficients; harmonic balance turns it into exact convolution
+matrices (its Fourier coefficients by quadrature between the breakpoints). ``Q_nl`` is the rest;
+it is evaluated by alternating frequency-time (AFT) on uniform samples, its jumps at the
+breakpoints corrected exactly.
+
+Write a system by subclassing :class:`PeriodicSystem` as a frozen dataclass registered as a JAX
+pytree, so that its float fields are traced arguments of the compiled programs (a new parameter
+value never recompiles)::
+
+    @jax.tree_util.register_dataclass
+    @dataclasses.dataclass(frozen=True)
+    class Oscillator(hbgear.PeriodicSystem):
+        damping: float = 0.02
+        ndof = 1                                   # a class attribute: structure, not data
+        is_linear = False
+        def mass_matrix(self, p, xp=np): return xp.ones((1, 1))
+        def excitation_frequency(self, p): return p
+        def force(self, s, q, qd, p, part, extra, xp=np): ...
+
+A subclass must implement (the engine calls nothing else):
+
+1. ``ndof`` -- the number of coordinates (an ``int``, a class attribute or property).
+2. ``is_linear`` -- ``True`` iff ``Q_nl`` is identically zero (then one linear solve is exact).
+3. ``mass_matrix(p, xp)`` -- ``M``, shape ``(ndof, ndof)``, symmetric positive definite.
+4. ``excitation_frequency(p)`` -- ``w_exc`` [rad/s] (the fundamental of the time dependence;
+   the harmonic-balance base frequency is ``w_exc / nu``).
+5. ``force(s, q, qd, p, part, extra, xp)`` -- ``Q`` at the phases ``s`` (any shape), with ``q``,
+   ``qd`` of shape ``(ndof,) + s.shape``; returns ``(ndof,) + s.shape``. ``part`` is
+   ``"linear"`` (``Q_lin`` only: it must be exactly affine in ``q``, ``qd``, the engine probes
+   it at unit vectors), ``"nonlinear"`` (``Q_nl``) or ``"all"``. ``extra`` is the constant force
+   unknown of a free coordinate (see ``free_mean_dof``; ``0.0`` otherwise). ``xp`` is ``numpy``
+   or ``jax.numpy``: write the force with ``xp`` functions only and no Python branching on
+   array values, so that the same code serves numpy (time integration, probes) and JAX
+   (residuals, exact Jacobians by automatic differentiation).
+
+Declared facts (class attributes with the defaults below; a claim the engine can check is
+checked, e.g. ``forcing_affine_in_frequency`` at a third parameter value, ``ndof`` against the
+shapes returned, ``is_linear`` at a probe state):
+
+- ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none).
+- ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
+  replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
+  its two trivial Floquet multipliers at 1 are dropped.
+- ``displacement_scale = 1.0``, ``force_scale = 1.0`` -- typical sizes of ``q`` and ``Q``: the
+  unknowns are ``q / displacement_scale``, the residual ``R / force_scale`` (tolerances are
+  relative to ``force_scale``).
+- ``coefficients_independent_of_parameter = False`` -- ``M``, the breakpoints and the periodic
+  stiffness and damping of ``Q_lin`` do not depend on ``p`` (only the forcing and the frequency
+  do): the operator is then built once per system.
+- ``forcing_affine_in_frequency = False`` -- ``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``
+  (the forcing is then combined from two quadratures; checked at a third value).
+- ``nonlinear_force_uses_displacement = True`` -- ``False`` when ``Q_nl`` depends on ``q'`` only
+  (its Jacobian then has no displacement blocks).
+- ``piecewise_constant_coefficients = False`` -- a linear system whose homogeneous coefficients
+  are constant between the breakpoints: its monodromy matrix is an exact product of matrix
+  exponentials.
 """
 
 from __future__ import annotations
@@ -25,13 +72,85 @@ from dataclasses import dataclass
 import numpy as np
 from jax.tree_util import register_dataclass
 
+__all__ = ["PeriodicSystem", "check_system", "Duffing"]
 
-__all__ = ["Duffing"]
+
+class PeriodicSystem:
+    """Base class of every system the engine solves; see the module docstring for the contract."""
+
+    free_mean_dof: int | None = None
+    displacement_scale = 1.0
+    force_scale = 1.0
+    coefficients_independent_of_parameter: bool = False
+    forcing_affine_in_frequency: bool = False
+    nonlinear_force_uses_displacement: bool = True
+    piecewise_constant_coefficients: bool = False
+
+    @property
+    def ndof(self) -> int:  # pragma: no cover - the contract
+        raise NotImplementedError(f"{type(self).__name__} must define ndof")
+
+    @property
+    def is_linear(self) -> bool:  # pragma: no cover - the contract
+        raise NotImplementedError(f"{type(self).__name__} must define is_linear")
+
+    def mass_matrix(self, p, xp=np):  # pragma: no cover - the contract
+        raise NotImplementedError(f"{type(self).__name__} must define mass_matrix(p, xp)")
+
+    def excitation_frequency(self, p):  # pragma: no cover - the contract
+        raise NotImplementedError(f"{type(self).__name__} must define excitation_frequency(p)")
+
+    def force(self, s, q, qd, p, part, extra, xp=np):  # pragma: no cover - the contract
+        raise NotImplementedError(f"{type(self).__name__} must define force(s, q, qd, p, part, extra, xp)")
+
+    def breakpoints(self, p, xp=np):
+        """Phases in [0, 1] where the force may jump (none by default)."""
+        return xp.zeros(0)
+
+
+def check_system(system, p) -> None:
+    """Check `system` against the contract at parameter `p` (numpy; a few force evaluations).
+
+    **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
+    first broken rule: ``ndof`` not a positive integer, a mass matrix or force of the wrong shape
+    or not finite, a ``free_mean_dof`` out of range, breakpoints outside [0, 1], or
+    ``is_linear = True`` with a nonzero nonlinear part.
+    """
+    if not isinstance(system, PeriodicSystem):
+        raise TypeError(f"{type(system).__name__} is not a hbgear.PeriodicSystem (subclass it: the class "
+                        "docstring of hbgear.engine.system lists the contract)")
+    name = type(system).__name__
+    n = system.ndof
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"{name}.ndof = {n!r}: a positive integer")
+    mass = np.asarray(system.mass_matrix(p, np), dtype=float)
+    if mass.shape != (n, n) or not np.all(np.isfinite(mass)):
+        raise ValueError(f"{name}.mass_matrix(p) has shape {mass.shape}: ({n}, {n}) finite values (ndof = {n})")
+    k = system.free_mean_dof
+    if k is not None and not (isinstance(k, (int, np.integer)) and 0 <= k < n):
+        raise ValueError(f"{name}.free_mean_dof = {k!r}: None or a coordinate index 0 .. {n - 1}")
+    bp = np.asarray(system.breakpoints(p, np), dtype=float)
+    if bp.ndim != 1 or np.any((bp < 0) | (bp > 1)):
+        raise ValueError(f"{name}.breakpoints(p) = {bp!r}: a 1-D array of phases in [0, 1]")
+    s = np.array([0.1234, 0.5678])
+    rng = np.random.default_rng(0)
+    q = rng.standard_normal((n, 2)) * float(system.displacement_scale)
+    qd = rng.standard_normal((n, 2)) * float(system.displacement_scale) * float(system.excitation_frequency(p))
+    for part in ("linear", "nonlinear", "all"):
+        f = np.asarray(system.force(s, q, qd, p, part, 0.0, np), dtype=float)
+        if f.shape != (n, 2) or not np.all(np.isfinite(f)):
+            raise ValueError(f"{name}.force(s, q, qd, p, {part!r}, ...) returned shape {f.shape} for s of shape (2,): "
+                             f"({n}, 2) finite values")
+    if system.is_linear:
+        f = np.asarray(system.force(s, q, qd, p, "nonlinear", 0.0, np), dtype=float)
+        if np.max(np.abs(f)) > 1e-12 * float(system.force_scale):
+            raise ValueError(f"{name}.is_linear is True but its nonlinear force part is {np.max(np.abs(f)):.3g} "
+                             "at a probe state (declare is_linear = False)")
 
 
 @register_dataclass
 @dataclass(frozen=True)
-class Duffing:
+class Duffing(PeriodicSystem):
     r"""``x'' + c x' + k x + a x^3 = f cos(w t)``; the parameter is ``w`` [rad/s].
 
     A generic check of the engine and of continuation (known backbone and jump frequencies).
@@ -43,15 +162,9 @@ class Duffing:
     forcing: float = 0.05
 
     ndof = 1
-    free_mean_dof = None
+    is_linear = False
     coefficients_independent_of_parameter = True
     forcing_affine_in_frequency = True
-    displacement_scale = 1.0
-    force_scale = 1.0
-
-    @property
-    def is_linear(self) -> bool:
-        return False
 
     def mass_matrix(self, p, xp=np):
         return xp.ones((1, 1))

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from jax.tree_util import register_dataclass
 
+from ..engine.system import PeriodicSystem
 from .model import GearPairModel
 
 __all__ = ["GearSystem"]
@@ -14,7 +15,7 @@ __all__ = ["GearSystem"]
 
 @register_dataclass
 @dataclass(frozen=True)
-class GearSystem:
+class GearSystem(PeriodicSystem):
     """The gear pair as a periodic system in the parameter ``parameter``.
 
     **Arguments:** `model`: the :class:`~hbgear.gear.model.GearPairModel`; `omega_pinion`: the pinion
@@ -81,6 +82,13 @@ class GearSystem:
         Backlash (the dead zone of ``delta``) and formulation-B loads (``F_mesh``) use ``q``."""
         m = self.model
         return not m.mesh_is_linear or (not m.friction_is_linear and m.formulation == "B")
+
+    @property
+    def piecewise_constant_coefficients(self) -> bool:
+        """LTI, or LTV formulation A, without backlash: the homogeneous coefficients are constant
+        between the breakpoints (``k(t)`` a rectangular pulse, friction an excitation)."""
+        m = self.model
+        return m.is_linear and (m.coupling == "LTI" or (m.coupling == "LTV" and m.formulation == "A"))
 
     @property
     def displacement_scale(self):
