@@ -110,7 +110,9 @@ def test_variational_state_synthesis_equals_the_solution_and_a_state_function():
     m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
     omega = 5300.0 / RPM
     sol = solve_periodic(m, omega, harmonics=16, samples=128)
-    synthesis = monodromy._state_synthesis(sol)
+    from hbgear.engine.monodromy import state_synthesis
+
+    synthesis = state_synthesis(sol.coefficients, sol.harmonics, sol.base_frequency)
     tau = np.array([0.0, 0.123, 0.5, 0.987])
     q, qd = sol.state_at(tau)
     for j, t in enumerate(tau):

@@ -37,7 +37,6 @@ import numpy as np
 from . import fourier
 from .quadrature import mesh_period_rule
 
-jax.config.update("jax_enable_x64", True)
 
 __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions"]
 

@@ -63,6 +63,13 @@ shapes returned, ``is_linear`` at a probe state):
 - ``piecewise_constant_coefficients = False`` -- a linear system whose homogeneous coefficients
   are constant between the breakpoints: its monodromy matrix is an exact product of matrix
   exponentials.
+- ``frequency_scale(p)`` -- a typical natural frequency [rad/s] (default: ``w_exc(p)``), the
+  velocity scale that balances the monodromy matrix (a similarity: it changes rounding only).
+- ``linearization()`` / ``in_linear_regime(hb, z, p)`` -- a linear system whose variational
+  equations are this system's along every solution for which ``in_linear_regime`` is true (the
+  gear pair with backlash while its teeth keep contact); there the exact monodromy of the linear
+  system gives the Floquet multipliers. Defaults: ``self`` for a linear system (always in its
+  regime), ``None`` otherwise.
 """
 
 from __future__ import annotations
@@ -106,6 +113,19 @@ class PeriodicSystem:
     def breakpoints(self, p, xp=np):
         """Phases in [0, 1] where the force may jump (none by default)."""
         return xp.zeros(0)
+
+    def frequency_scale(self, p):
+        """A typical natural frequency [rad/s] (balancing of monodromy matrices); ``w_exc(p)``."""
+        return self.excitation_frequency(p)
+
+    def linearization(self) -> PeriodicSystem | None:
+        """The linear system whose variational equations are this one's in its linear regime."""
+        return self if self.is_linear else None
+
+    def in_linear_regime(self, hb, z, p) -> bool:
+        """Whether the solution `z` (scaled unknowns of `hb`) at `p` stays in the regime where
+        :meth:`linearization` holds."""
+        return True
 
 
 def check_system(system, p) -> None:
