@@ -46,7 +46,8 @@ Declared facts (class attributes with the defaults below; a claim the engine can
 checked, e.g. ``forcing_affine_in_frequency`` at a third parameter value, ``ndof`` against the
 shapes returned, ``is_linear`` at a probe state):
 
-- ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none).
+- ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none); values outside
+  [0, 1] and duplicates are ignored, so a traced computation may return candidates unfiltered.
 - ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
   replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
   its two trivial Floquet multipliers at 1 are dropped.
@@ -133,7 +134,7 @@ def check_system(system, p) -> None:
 
     **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
     first broken rule: ``ndof`` not a positive integer, a mass matrix or force of the wrong shape
-    or not finite, a ``free_mean_dof`` out of range, breakpoints outside [0, 1], or
+    or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
     ``is_linear = True`` with a nonzero nonlinear part.
     """
     if not isinstance(system, PeriodicSystem):
@@ -150,8 +151,8 @@ def check_system(system, p) -> None:
     if k is not None and not (isinstance(k, (int, np.integer)) and 0 <= k < n):
         raise ValueError(f"{name}.free_mean_dof = {k!r}: None or a coordinate index 0 .. {n - 1}")
     bp = np.asarray(system.breakpoints(p, np), dtype=float)
-    if bp.ndim != 1 or np.any((bp < 0) | (bp > 1)):
-        raise ValueError(f"{name}.breakpoints(p) = {bp!r}: a 1-D array of phases in [0, 1]")
+    if bp.ndim != 1 or not np.all(np.isfinite(bp)):
+        raise ValueError(f"{name}.breakpoints(p) = {bp!r}: a 1-D array of finite phases")
     s = np.array([0.1234, 0.5678])
     rng = np.random.default_rng(0)
     q = rng.standard_normal((n, 2)) * float(system.displacement_scale)
