@@ -65,17 +65,17 @@ def solve_static_contact(stiffness, gap, in_contact, load, xp=np):
     g_sorted = xp.take_along_axis(g, order, axis=0)
     k_sorted = xp.take_along_axis(k, order, axis=0)
     finite = xp.isfinite(g_sorted)
-    kg_sorted = xp.where(finite, k_sorted * xp.where(finite, g_sorted, 0.0), 0.0)
+    g_finite = xp.where(finite, g_sorted, 0.0)  # k is 0 where g is inf: no inf * 0
+    kg_sorted = k_sorted * g_finite
     k_total = xp.cumsum(k_sorted, axis=0)
     kg_total = xp.cumsum(kg_sorted, axis=0)
     # force needed to close the sorted gap i with the pairs before it: sum_{l<i} k_l (g_i - g_l)
-    to_reach = xp.where(finite, xp.where(finite, g_sorted, 0.0) * (k_total - k_sorted) - (kg_total - kg_sorted),
-                        math.inf)
+    to_reach = xp.where(finite, g_finite * (k_total - k_sorted) - (kg_total - kg_sorted), math.inf)
     loaded = xp.maximum(xp.sum(to_reach < load[None], axis=0), 1)
     last = (loaded - 1)[None]
     delta = (load + xp.take_along_axis(kg_total, last, axis=0)[0]) / xp.take_along_axis(k_total, last, axis=0)[0]
     closure = xp.where(in_contact, delta[None] - gap, 0.0)
-    pair_loads = stiffness * xp.maximum(closure, 0.0) * in_contact
+    pair_loads = stiffness * xp.maximum(closure, 0.0)
     carrying = in_contact & (closure >= 0.0)
     return delta, pair_loads, xp.sum(xp.where(carrying, stiffness, 0.0), axis=0)
 

@@ -121,7 +121,6 @@ def load_pair_stiffness_table(path, pair: GearPair, key: str = _KEY) -> TablePai
     """
     path = Path(path)
     position_name, position_first, rows = _read_rows(path, key)
-    header = _STIFFNESS
     positions, values = [], []
     for number, row in rows:
         cells = [cell.strip() for cell in row]
@@ -135,7 +134,7 @@ def load_pair_stiffness_table(path, pair: GearPair, key: str = _KEY) -> TablePai
             raise _bad(path, f"line {number} {','.join(cells)!r}", "finite numbers", key)
         position, stiffness = numbers if position_first else numbers[::-1]
         if stiffness <= 0.0:
-            raise _bad(path, f"line {number} {header} = {stiffness!r}", f"{header} > 0", key)
+            raise _bad(path, f"line {number} {_STIFFNESS} = {stiffness!r}", f"{_STIFFNESS} > 0", key)
         if positions and position <= positions[-1]:
             raise _bad(path, f"line {number} {position_name} = {position!r}", f"strictly increasing {position_name}",
                        key)
