@@ -143,17 +143,13 @@ class GearPair:
 
     @property
     def tip_radius_pinion_m(self) -> float:
-        """``r_ap = r_p + (h_a + x_1 - k) m``."""
-        if self._unshifted and not self.tip_shortening:
-            return self.pitch_radius_pinion_m + self.addendum_coefficient * self.module_m
+        """``r_ap = r_p + (h_a + x_1 - k) m`` (exactly ``r_p + h_a m`` when ``x_1 = k = 0``)."""
         addendum = self.addendum_coefficient + self.profile_shift_pinion - self.tip_shortening_coefficient
         return self.pitch_radius_pinion_m + addendum * self.module_m
 
     @property
     def tip_radius_gear_m(self) -> float:
         """``r_ag = r_g + (h_a + x_2 - k) m``."""
-        if self._unshifted and not self.tip_shortening:
-            return self.pitch_radius_gear_m + self.addendum_coefficient * self.module_m
         addendum = self.addendum_coefficient + self.profile_shift_gear - self.tip_shortening_coefficient
         return self.pitch_radius_gear_m + addendum * self.module_m
 
