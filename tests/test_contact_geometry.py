@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from hbgear.geometry import GearPair, involute, inverse_involute
+from hbgear.gear.geometry import GearPair, involute, inverse_involute
 
 PHI = math.radians(20.0)
 

@@ -9,7 +9,7 @@ import pytest
 
 from hbgear.gear.contact import Iso6336PairStiffness, iso6336_stiffness, pair_positions
 from hbgear.gear.contact.iso6336 import parabola_curvature
-from hbgear.geometry import GearPair
+from hbgear.gear.geometry import GearPair
 
 jax.config.update("jax_enable_x64", True)
 

@@ -8,7 +8,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 
 from hbgear.gear.contact.potential_energy import _profile, potential_energy_pair_stiffness, tooth_compliances
-from hbgear.geometry import GearPair, involute
+from hbgear.gear.geometry import GearPair, involute
 
 PHI = math.radians(20.0)
 M, Z, B, E, NU = 3.175e-3, 25, 0.020, 206e9, 0.3

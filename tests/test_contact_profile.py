@@ -9,7 +9,7 @@ import pytest
 
 from hbgear.errors import ConfigError
 from hbgear.gear.contact import FlankRelief, ProfileModification, profile_modification
-from hbgear.geometry import GearPair
+from hbgear.gear.geometry import GearPair
 
 jax.config.update("jax_enable_x64", True)
 

@@ -20,7 +20,7 @@ from hbgear.gear.contact import (
     solve_static_contact,
     static_transmission_error,
 )
-from hbgear.geometry import GearPair
+from hbgear.gear.geometry import GearPair
 
 jax.config.update("jax_enable_x64", True)
 

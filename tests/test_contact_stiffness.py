@@ -10,7 +10,7 @@ import pytest
 from hbgear.errors import ConfigError
 from hbgear.gear.contact import ConstantPairStiffness, Iso6336PairStiffness, load_pair_stiffness_table
 from hbgear.gear.contact.stiffness import TABLE_COVERAGE_TOLERANCE
-from hbgear.geometry import GearPair
+from hbgear.gear.geometry import GearPair
 
 jax.config.update("jax_enable_x64", True)
 

@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ...geometry import GearPair
+from ..geometry import GearPair
 
 __all__ = [
     "ISO6336_COEFFICIENTS",

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from ...geometry import GearPair, involute
+from ..geometry import GearPair, involute
 from .stiffness import TablePairStiffness
 
 __all__ = ["SAINSOT_COEFFICIENTS", "potential_energy_pair_stiffness", "tooth_compliances"]

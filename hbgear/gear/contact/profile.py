@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import ConfigError
-from ...geometry import GearPair
+from ..geometry import GearPair
 
 __all__ = ["SHAPES", "FlankRelief", "ProfileModification", "profile_modification"]
 

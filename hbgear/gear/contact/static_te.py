@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ...geometry import GearPair
+from ..geometry import GearPair
 from .profile import ProfileModification
 
 __all__ = ["StaticTE", "harris_map", "pair_positions", "solve_static_contact", "static_transmission_error"]

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import ConfigError
-from ...geometry import GearPair
+from ..geometry import GearPair
 
 __all__ = [
     "ConstantPairStiffness",
