@@ -9,11 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ConfigError
-from .gear.friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
 from .gear.geometry import GearPair
-from .gear.model import GearPairModel
 
-__all__ = ["build_geometry", "build_model", "friction_law"]
+__all__ = ["build_geometry", "build_model", "check_config", "friction_law", "model_at_contact_ratio"]
 
 
 def build_geometry(gear, contact_ratio: float | None = None) -> GearPair:
@@ -29,6 +27,8 @@ def build_geometry(gear, contact_ratio: float | None = None) -> GearPair:
 
 def friction_law(friction):
     """The friction law object of ``[friction]``."""
+    from .gear.friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
+
     if friction.law == "none" or friction.mu0 == 0.0 and friction.law in ("coulomb", "arctan"):
         return NoFriction()
     if friction.law == "coulomb":
@@ -36,16 +36,20 @@ def friction_law(friction):
     if friction.law == "arctan":
         return Arctan(friction.mu0, friction.v0_m_per_s)
     if friction.law == "kelley-lemanski":
-        if friction.roughness_um >= 1.27:
-            raise ConfigError("friction.roughness_um", friction.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
         return KelleyLemanski(friction.viscosity_Pa_s, friction.roughness_um)
     raise ConfigError("friction.law", friction.law, f"one of {sorted(LAWS)}")
 
 
-def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
-    """The gear-pair model of a run config (SI throughout)."""
+def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, float]:
+    """The physics checks of a run config that need the geometry but no JAX (so a bad input ends
+    at once, before anything heavy is imported): the contact ratio in (1, 2), a mean stiffness
+    giving ``0 < k_min <= k_max``, the coupling/formulation/boundary/backlash combinations, the
+    Kelley-Lemanski roughness limit.
+
+    **Returns:** ``(geometry, k_min [N/m])``. **Raises:** :class:`~hbgear.errors.ConfigError`.
+    """
     geometry = build_geometry(cfg.gear, contact_ratio)
-    mesh = cfg.mesh
+    mesh, fr = cfg.mesh, cfg.friction
     gamma = geometry.contact_ratio
     if mesh.k_min_N_per_m is not None:
         k_min = mesh.k_min_N_per_m
@@ -60,17 +64,12 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
                 mesh.k_mean_N_per_m / 1e6,
                 f"a mean stiffness giving 0 < k_min <= k_max at contact ratio {gamma:.4f}",
             )
-    law = friction_law(cfg.friction)
-    fr = cfg.friction
-    if fr.model == "NLTV" and law.discontinuous:
-        # sgn(Vs) of the instantaneous sliding velocity is regularised (documented, shared by HB
-        # and time integration): (2/pi) atan(Vs / v_reg)
-        law = law.regularized(fr.regularization_m_per_s)
+    if fr.law == "kelley-lemanski" and fr.roughness_um >= 1.27:
+        raise ConfigError("friction.roughness_um", fr.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
-    contact = "backlash" if mesh.backlash_m > 0 else "linear"
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
-    if coupling == "LTI" and contact == "backlash":
+    if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
     if coupling == "NLTV" and boundary == "torques":
         raise ConfigError(
@@ -79,6 +78,23 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
             "'spring' or 'reaction' with model 'NLTV' (friction needs both gear speeds; with constant "
             "torques only the DTE is periodic)",
         )
+    return geometry, k_min
+
+
+def build_model(cfg, contact_ratio: float | None = None):
+    """The gear-pair model of a run config (SI throughout); :func:`check_config` first."""
+    from .gear.model import GearPairModel
+
+    geometry, k_min = check_config(cfg, contact_ratio)
+    mesh, fr = cfg.mesh, cfg.friction
+    gamma = geometry.contact_ratio
+    law = friction_law(fr)
+    if fr.model == "NLTV" and law.discontinuous:
+        # sgn(Vs) of the instantaneous sliding velocity is regularised (documented, shared by HB
+        # and time integration): (2/pi) atan(Vs / v_reg)
+        law = law.regularized(fr.regularization_m_per_s)
+    coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
+    contact = "backlash" if mesh.backlash_m > 0 else "linear"
     return GearPairModel(
         teeth_pinion=float(geometry.teeth_pinion),
         teeth_gear=float(geometry.teeth_gear),
@@ -107,3 +123,9 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
         damping_model=mesh.damping_model,
         contact=contact,
     )
+
+
+def model_at_contact_ratio(cfg, contact_ratio: float):
+    """The config's model at another contact ratio: ``k_max``, ``k_min`` held (they belong to the
+    teeth), ``k_mean`` follows (MODEL.md section 2)."""
+    return build_model(cfg, contact_ratio=float(contact_ratio))

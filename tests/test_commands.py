@@ -83,7 +83,7 @@ def test_frc_writes_every_floquet_multiplier(tmp_path, model):
 def test_unstable_zone_between_curve_points_is_found():
     """The LTV-A pair has a period-doubling zone near 3800 rpm narrower than a curve step there."""
     from hbgear.build import build_model
-    from hbgear.cli.frc import unstable_zones
+    from hbgear.gear.response import unstable_zones
     from hbgear.config import load_config
     from hbgear.gear.solve import rpm_to_rad_s
     from hbgear.gear.monodromy import multipliers_linear
@@ -103,7 +103,7 @@ def test_unstable_zone_between_curve_points_is_found():
 
 
 def test_zone_labels_how_the_multiplier_leaves():
-    from hbgear.cli.frc import _leaves_through
+    from hbgear.engine.stability import leaves_through as _leaves_through
 
     assert _leaves_through(complex(-1.02, 0.0)) == "-1"
     assert _leaves_through(complex(1.02, 0.0)) == "+1"

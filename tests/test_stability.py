@@ -11,6 +11,7 @@ from scipy.optimize import linear_sum_assignment
 
 from hbgear.engine import floquet
 
+from hbgear.build import model_at_contact_ratio
 from hbgear.gear import maps
 
 from hbgear.gear import monodromy
@@ -150,10 +151,10 @@ def test_map_reproduces_parametric_tongues():
 
 def test_map_holds_tooth_stiffnesses_and_shifts_zone_with_contact_ratio():
     cfg = config('boundary.output="torques"')
-    lo, hi = maps.model_at_contact_ratio(cfg, 1.35), maps.model_at_contact_ratio(cfg, 1.65)
+    lo, hi = model_at_contact_ratio(cfg, 1.35), model_at_contact_ratio(cfg, 1.65)
     assert lo.k_min_N_per_m == hi.k_min_N_per_m and lo.k_max_N_per_m == hi.k_max_N_per_m
     speeds = np.linspace(20000, 32000, 121)
-    values = maps.stability_map_ltv_a(cfg, speeds, [1.35, 1.65])
+    values = maps.stability_map_ltv_a([lo, hi], speeds)
     centre = [np.average(speeds, weights=np.clip(v - 1, 0, None)) for v in values]
     assert centre[1] > centre[0] + 500  # k_mean grows with Gamma
 
@@ -207,7 +208,7 @@ def test_resume_skips_finished_rows(small_config, tmp_path, monkeypatch):
     assert calls == [ratios[1]]
     np.testing.assert_array_equal(values[0], finished[0])
     np.testing.assert_array_equal(values[2], finished[2])
-    np.testing.assert_allclose(values[1], maps.stability_row(small_config, ratios[1], speeds))
+    np.testing.assert_allclose(values[1], real(small_config, ratios[1], speeds))
     assert not (tmp_path / cmd.PARTIAL).exists()
     lines = (tmp_path / "stability.csv").read_text().splitlines()
     assert lines[0] == "speed_rpm,contact_ratio,max_abs_floquet" and len(lines) == 1 + 18

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hbgear.gear import maps as gear_maps
+import hbgear
+from hbgear.build import model_at_contact_ratio
 from hbgear.config import load_config
 
 HERE = Path(__file__).resolve().parent
@@ -57,15 +58,15 @@ def main():
     for name, extra in cases.items():
         cfg = load_config(EXAMPLE, ['boundary.output="torques"', 'friction.model="LTV"', *extra])
         t0 = time.perf_counter()
-        maps[name] = gear_maps.stability_map(cfg, speeds, ratios)
+        maps[name] = hbgear.stability_map(cfg, speeds, ratios)
         timings[name] = time.perf_counter() - t0
     cfg0 = load_config(EXAMPLE, ['boundary.output="torques"'])
-    m0 = gear_maps.model_at_contact_ratio(cfg0, 1.433)
+    m0 = model_at_contact_ratio(cfg0, 1.433)
     wn = math.sqrt(m0.k_mean_N_per_m / m0.mass_equivalent_kg)
     primary_rpm = 2 * wn / m0.teeth_pinion * 60 / (2 * np.pi)
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6), layout="constrained", sharey=True)
-    from hbgear.cli.stability_map import plot_stability_map
+    from hbgear.outputs.plots import stability_map_figure as plot_stability_map
 
     for ax, name in zip(axes[:2], ["A, mu0 = 0", "B, mu0 = 0.1"]):
         plot_stability_map(speeds, ratios, maps[name], title=f"LTV {name}: max |multiplier|", ax=ax)

@@ -837,8 +837,7 @@ def check_fig13():
     import importlib
 
 
-    from hbgear.gear import maps as gear_maps
-
+    import hbgear
     from hbgear.config import load_config
 
     mod = importlib.import_module("validation.fig13_stability_map")
@@ -853,7 +852,7 @@ def check_fig13():
                          ("A1", ("friction.formulation='A'", "friction.mu0=0.1")),
                          ("B1", ("friction.formulation='B'", "friction.mu0=0.1"))):
         cfg = load_config(EXAMPLE, ["boundary.output='torques'", "friction.model='LTV'", *extra])
-        maps[label] = gear_maps.stability_map(cfg, speeds, [1.433])[0]
+        maps[label] = hbgear.stability_map(cfg, speeds, [1.433])[0]
     ea, eb = mod.zone_edges(speeds, maps["A0"]), mod.zone_edges(speeds, maps["B1"])
     m0 = model_of("boundary.output='torques'")
     primary = 2 * math.sqrt(m0.k_mean_N_per_m / m0.mass_equivalent_kg) / m0.teeth_pinion * 30 / math.pi

@@ -5,8 +5,11 @@ ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules o
 (see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
-overrides -> the command's optional `validate(config, args)` -> create the output directory
-(only now, so a bad input never leaves anything behind) -> `run(config, args, out_dir)`.
+overrides -> :func:`hbgear.build.check_config` (the physics checks) -> the command's optional
+`validate(config, args)` -> create the output directory (only now, so a bad input never leaves
+anything behind) -> :func:`hbgear.runtime.configure` -> `run(config, args, out_dir)`. Everything
+before `run` imports neither JAX nor matplotlib, so ``--help``, ``--version`` and every bad input
+answer at once; command modules import their heavy dependencies inside `run`.
 
 Exit status: 0 success (or what `run` returns); 2 bad input -- a
 :class:`~hbgear.errors.ConfigError` or a usage error -- with exactly one line
@@ -26,6 +29,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
+from .. import runtime
+from ..build import check_config
 from ..config import RunConfig, load_config
 from ..errors import ConfigError, ConvergenceError
 from ..outputs.io import prepare_out_dir
@@ -219,11 +224,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         command = COMMANDS[args.command]
         config = load_config(args.config, args.overrides or ())
+        check_config(config)
         if command.validate is not None:
             command.validate(config, args)
         out_dir = args.out if args.out is not None else Path("hbgear-out") / command.name
         created = not out_dir.exists()
         out_dir = prepare_out_dir(out_dir)
+        runtime.configure()  # one XLA thread, the disk compilation cache: before any computation
         status = command.run(config, args, out_dir)
         return EXIT_OK if status is None else int(status)
     except _UsageError as exc:

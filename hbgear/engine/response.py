@@ -333,7 +333,7 @@ def _follow_record(system, point: PeriodDoublingPoint, hb, follow, ends, doubled
     """Follow the ``nu = 2`` branch at `point` (when `follow` and not rejoined already); the record's
     status/message/branch index; appends to `doubled` and, if it reconnects, its end to `ends`."""
     if system.is_linear:
-        return {"status": "not followed", "message": "linear system: the nu = 2 branch is vertical and unbounded at "
+        return {"status": "not followed", "message": "linear model: the nu = 2 branch is vertical and unbounded at "
                 "the crossing (a parametric instability), nothing to follow"}
     if not follow:
         return {"status": "not followed", "message": "nu = 2 branches not followed here"}
@@ -398,7 +398,7 @@ def frequency_response(system, parameter: tuple[float, float], *, harmonics: int
         doubled_stab = [branch_stability(d.hb, system, d.p, d.z, progress=progress, label="Floquet multipliers (nu = 2)")
                         for d in doubled]
     t4 = clock()
-    timings = {"continuation": t1 - t0, "start": branch.start_seconds, "stability": t2 - t1, "zones": t3 - t2,
-               "period_doubling": t4 - t3}
+    timings = {"compile_and_start_point": branch.start_seconds, "continuation": t1 - t0 - branch.start_seconds,
+               "stability": t2 - t1, "zones": t3 - t2, "period_doubling": t4 - t3}
     return FrequencyResponse(system, hb, branch, stab, found_zones, records, doubled, doubled_stab, timings)
 

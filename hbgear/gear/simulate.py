@@ -576,7 +576,7 @@ def simulate(
             f"time integration at {omega * 30 / math.pi:.6g} rpm reached no steady state within "
             f"{cycles_done} mesh cycles: the DTE still changes by {measure:.2e} of its peak-to-peak "
             f"between periods (tolerance {steady_tolerance:.1e}); raise the mesh damping ratio or "
-            f"[boundary] damping_ratio, or allow more cycles (--cycles / simulate.cycles)"
+            f"the soft output spring's damping ratio, or allow more cycles (max_cycles)"
         )
 
     # one steady period at the quadrature nodes -> summary (weights sum to 1)
