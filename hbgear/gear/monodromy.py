@@ -48,8 +48,8 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
 
     **Arguments:** `model`: a :class:`~hbgear.gear.model.GearPairModel` with ``model.is_linear``
     (LTI, or LTV with teeth that never separate); `omegas`: pinion speeds [rad/s], scalar or
-    1-D; `substeps`: Magnus sub-steps per segment (default 1 for LTI / LTV-A, exact; 16 for
-    LTV-B, relative error ~1e-10); `balanced`: the matrix for ``(q, q'/w_n)``, ``w_n =
+    1-D; `substeps`: Magnus sub-steps per segment (default 1 for LTI / LTV-A, exact; for LTV-B
+    doubled from 16 until converged, :func:`hbgear.engine.monodromy.monodromy_linear`); `balanced`: the matrix for ``(q, q'/w_n)``, ``w_n =
     sqrt(k_mean/m_e)`` (same eigenvalues, better conditioned).
 
     **Returns:** ``Phi`` with ``x(Tm) = Phi x(0)``, ``x = (q, q')`` in SI; shape
