@@ -1,6 +1,7 @@
 """Loaded static TE: exact piecewise-linear solve against a scalar root solve, limits, Harris map."""
 
 import math
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -15,10 +16,15 @@ from hbgear.gear.contact import (
     FlankRelief,
     Iso6336PairStiffness,
     ProfileModification,
+    RectangularMeshStiffness,
+    TablePairStiffness,
     harris_map,
+    loaded_te_table,
     pair_positions,
+    pair_stiffness_max,
     solve_static_contact,
     static_transmission_error,
+    unloaded_ste,
 )
 from hbgear.gear.geometry import GearPair
 
@@ -148,3 +154,79 @@ def test_harris_map_minimum_moves_with_relief_amount_iso_shape():
             unmodified = harris_map(PAIR, ISO, [LOAD])[0]
             assert p2p.min() < 0.15 * unmodified
     assert minima[0] < minima[1] < minima[2]
+
+
+# ----------------------------------------------------------------------------- torque tables
+
+
+def test_rectangular_mesh_stiffness_is_ste_plus_load_over_k():
+    # the paper's k(s) (k_max != 2 k_min), written out here on its own: delta = eps + N / k(s)
+    k_max, k_min = 7.2e8, 4.519e8
+    phases = np.arange(360) / 360
+    ste = 2e-6 * np.cos(2 * np.pi * phases + 0.4) + 0.5e-6 * np.cos(4 * np.pi * phases)
+    result = static_transmission_error(PAIR, RectangularMeshStiffness(k_max, k_min), LOAD, phases=phases,
+                                       unloaded_ste_m=ste)
+    k = np.where(phases < PAIR.contact_ratio - 1.0, k_max, k_min)
+    np.testing.assert_allclose(result.delta_m, ste + LOAD / k, rtol=1e-13, atol=0)
+    assert np.all(result.mesh_stiffness_N_per_m == k)
+    double = phases < PAIR.contact_ratio - 1.0
+    np.testing.assert_allclose(result.pair_loads_N[:, double], LOAD / 2, rtol=1e-13)  # equal sharing
+    # k_max = 2 k1, k_min = k1 is the constant single-pair stiffness k1, exactly
+    k1 = 3.6e8
+    same = static_transmission_error(PAIR, RectangularMeshStiffness(2 * k1, k1), LOAD)
+    constant = static_transmission_error(PAIR, ConstantPairStiffness(k1), LOAD)
+    for a, b in zip(same, constant):
+        assert np.array_equal(a, b)
+
+
+def test_unloaded_ste_is_the_dynamic_models():
+    from hbgear.build import build_model
+    from hbgear.config import load_config
+
+    example = Path(__file__).resolve().parent.parent / "examples" / "paper_table1.toml"
+    model = build_model(load_config(example, ["mesh.ste_amplitude_um=[1.5, 0.4, 0.1]",
+                                              "mesh.ste_phase_deg=[10.0, -70.0, 200.0]"]))
+    phases = np.linspace(0.0, 1.0, 101)
+    expected, _ = model.static_transmission_error(phases, 1.0)
+    got = unloaded_ste(phases, model.ste_amplitude_m, model.ste_phase_rad)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-21)
+    assert np.all(unloaded_ste(phases) == 0.0)
+
+
+def test_loaded_te_table_is_one_static_solve_per_torque():
+    mod = ProfileModification(FlankRelief(8e-6, RELIEF_LENGTH), FlankRelief(8e-6, RELIEF_LENGTH))
+    soft = Iso6336PairStiffness(0.7 * ISO.peak_N_per_m, ISO.path_length_m, ISO.contact_ratio)
+    torques = [150.0, 226.0]
+    phases = np.arange(90) / 90
+    table = loaded_te_table(PAIR, [soft, ISO], torques, modification=mod, phases=phases,
+                            ste_amplitude_m=(1e-6,), ste_phase_rad=(0.3,))
+    xi, contact = pair_positions(PAIR, phases)
+    ste = 1e-6 * np.cos(2 * np.pi * phases + 0.3)
+    for i, (model, torque) in enumerate(zip([soft, ISO], torques)):
+        load = torque / PAIR.base_radius_pinion_m
+        one = static_transmission_error(PAIR, model, load, modification=mod, phases=phases, unloaded_ste_m=ste)
+        assert table.load_N[i] == load
+        assert np.array_equal(table.delta_m[i], one.delta_m)
+        assert np.array_equal(table.pair_loads_N[i], one.pair_loads_N)
+        assert np.array_equal(table.mesh_stiffness_N_per_m[i], one.mesh_stiffness_N_per_m)
+        assert table.p2p_m[i] == np.ptp(one.delta_m) and table.mean_m[i] == np.mean(one.delta_m)
+        assert table.mesh_stiffness_mean_N_per_m[i] == np.mean(one.mesh_stiffness_N_per_m)
+        expected_k = np.where(contact, model.stiffness(xi - PAIR.contact_start_m), 0.0)
+        assert np.array_equal(table.pair_stiffness_N_per_m[i], expected_k)
+    assert table.pair_stiffness_max_N_per_m.tolist() == [soft.peak_N_per_m, ISO.peak_N_per_m]
+    np.testing.assert_allclose(table.position_m, xi - PAIR.contact_start_m, rtol=0, atol=1e-18)
+    # one model for every torque
+    shared = loaded_te_table(PAIR, ISO, torques, modification=mod, phases=phases)
+    assert np.array_equal(shared.p2p_m, harris_map(PAIR, ISO, table.load_N, modification=mod, phases=phases))
+
+
+def test_pair_stiffness_max_of_each_model():
+    path = PAIR.contact_end_m - PAIR.contact_start_m
+    assert pair_stiffness_max(ISO, PAIR) == ISO.peak_N_per_m  # mid-path, on the sample grid
+    assert pair_stiffness_max(ConstantPairStiffness(3e8), PAIR) == 3e8
+    assert pair_stiffness_max(RectangularMeshStiffness(7.2e8, 4.5e8), PAIR) == 4.5e8
+    assert pair_stiffness_max(RectangularMeshStiffness(7.2e8, 3e8), PAIR) == 3.6e8
+    # a peak between the uniform samples, at a table node; a node outside the path does not count
+    peak_at = 0.123456789 * path
+    table = TablePairStiffness((-0.01 * path, peak_at, path, 1.01 * path), (1e8, 3e8, 2e8, 9e8))
+    assert pair_stiffness_max(table, PAIR) == 3e8

@@ -1,7 +1,7 @@
 """Command-line framework: `hbgear <command> CONFIG [--set section.key=value ...] [--out DIR]`.
 
 Commands live in a registry (:data:`COMMANDS`) filled through :func:`register`; the built-in
-ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules of this package
+ones (`frc`, `solve`, `simulate`, `stability-map`, `static-te`, `validate`) are the modules of this package
 (see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
@@ -65,6 +65,8 @@ class Command:
       `ConfigError` for bad input and `ConvergenceError` for a failed computation.
     - `validate(config, args)`: optional check of the command's options against the
       config, run before the output directory is created; raise `ConfigError`.
+    - `dynamic_model`: the command builds the dynamic model, so the config's physics checks
+      (:func:`hbgear.build.check_config`) run first.
     """
 
     name: str
@@ -72,6 +74,7 @@ class Command:
     add_arguments: Callable[[argparse.ArgumentParser], None] | None
     run: Callable[[RunConfig, argparse.Namespace, Path], int]
     validate: Callable[[RunConfig, argparse.Namespace], None] | None = None
+    dynamic_model: bool = True
 
 
 COMMANDS: dict[str, Command] = {}
@@ -91,7 +94,7 @@ def register(command: Command, *, replace: bool = False) -> Command:
 
 
 #: The shipped commands: one module each in this package, registering itself on import.
-BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "validate")
+BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "static_te", "validate")
 
 
 def _load_builtin_commands() -> None:
@@ -224,7 +227,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         command = COMMANDS[args.command]
         config = load_config(args.config, args.overrides or ())
-        check_config(config)
+        if command.dynamic_model:
+            check_config(config)
         if command.validate is not None:
             command.validate(config, args)
         out_dir = args.out if args.out is not None else Path("hbgear-out") / command.name

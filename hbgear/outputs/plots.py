@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["frc_figure", "system_curve_figure", "timeseries_figure", "validation_figure", "stability_map_figure",
-           "CONTOUR_MARGIN"]
+           "static_te_figure", "harris_figure", "CONTOUR_MARGIN"]
 
 #: The unit contour of a stability map is drawn at 1 + this, so a neutral mode (the soft output
 #: spring's, whose modulus is 1 to within rounding) does not draw noise all over the map.
@@ -197,4 +197,51 @@ def stability_map_figure(speeds_rpm, contact_ratios, values, title: str = "", ax
         ax.legend(fontsize=8)
     ax.set_xlabel("pinion speed [rpm]")
     ax.set_title(title, fontsize=8)
+    return fig
+
+
+def static_te_figure(table, title: str):
+    """Figure: loaded TE, pair loads and stiffness against the mesh phase, one colour per torque."""
+    fig = _figure(figsize=(8, 8))
+    ax_te, ax_load, ax_k = fig.subplots(3, 1, sharex=True)
+    styles = ("-", "--", ":", "-.")
+    for i, torque in enumerate(table.torque_pinion_Nm):
+        color = f"C{i % 10}"
+        ax_te.plot(table.phase, 1e6 * table.delta_m[i], color=color, label=f"{torque:g} N m")
+        ax_k.plot(table.phase, 1e-6 * table.mesh_stiffness_N_per_m[i], color=color,
+                  label="mesh, dN/d delta" if i == 0 else None)
+        for j in range(table.in_contact.shape[0]):
+            contact = table.in_contact[j]
+            style = styles[j % len(styles)]
+            ax_load.plot(table.phase[contact], table.pair_loads_N[i, j][contact], style, color=color,
+                         label=f"pair {j + 1}" if i == 0 else None)
+            if i == 0:
+                ax_k.plot(table.phase[contact], 1e-6 * table.pair_stiffness_N_per_m[0, j][contact], style,
+                          color="0.5", lw=1.0, label=f"pair {j + 1}, k_j")
+    ax_te.set_ylabel("loaded static TE [um]")
+    ax_load.set_ylabel("pair load [N]")
+    ax_k.set_ylabel("stiffness [MN/m]")
+    ax_k.set_xlabel("mesh phase [-]")
+    for ax in (ax_te, ax_load, ax_k):
+        ax.legend(fontsize=8, loc="best")
+        ax.grid(alpha=0.3)
+    ax_te.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def harris_figure(torques_Nm, p2p_um, design_torque_Nm: float, title: str):
+    """Figure: the Harris map, loaded TE peak-to-peak against pinion torque."""
+    order = np.argsort(torques_Nm)
+    fig = _figure(figsize=(7, 4.5))
+    ax = fig.subplots()
+    ax.plot(np.asarray(torques_Nm)[order], np.asarray(p2p_um)[order], "o-", color="k")
+    ax.axvline(design_torque_Nm, color="tab:blue", ls="--", lw=1.0, label=f"[load] torque {design_torque_Nm:g} N m")
+    ax.set_xlabel("pinion torque [N m]")
+    ax.set_ylabel("loaded static TE peak-to-peak [um]")
+    ax.set_ylim(bottom=0.0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
     return fig

@@ -14,6 +14,10 @@ sorted gaps at which the force needed to reach them, ``sum_{l<i} k_(l) (g_(i) - 
 still below ``N``. That is exact (no iteration, no tolerance) and vectorised over phases and
 loads. The pair loads are ``F_j = k_j max(delta_s - g_j, 0)`` and the effective mesh stiffness
 ``dN/d delta_s = sum of k_j over the pairs carrying load``.
+
+:func:`loaded_te_table` evaluates this at a list of pinion torques ``T_p`` (``N = T_p / R_bp``),
+each with its own stiffness model if the stiffness depends on the load (ISO 6336's low-load
+factor), with the harmonic unloaded STE ``eps(s)`` of the config.
 """
 
 from __future__ import annotations
@@ -25,8 +29,24 @@ import numpy as np
 
 from ..geometry import GearPair
 from .profile import ProfileModification
+from .stiffness import RectangularMeshStiffness, TablePairStiffness
 
-__all__ = ["StaticTE", "harris_map", "pair_positions", "solve_static_contact", "static_transmission_error"]
+__all__ = [
+    "DEFAULT_PHASES",
+    "LoadedTE",
+    "StaticTE",
+    "harris_map",
+    "loaded_te_table",
+    "pair_positions",
+    "pair_stiffness_max",
+    "slot_stiffness",
+    "solve_static_contact",
+    "static_transmission_error",
+    "unloaded_ste",
+]
+
+#: Mesh phases sampled per mesh period by default (uniform, from 0).
+DEFAULT_PHASES = 720
 
 
 def pair_positions(pair: GearPair, s, slots: int | None = None, xp=np):
@@ -39,6 +59,45 @@ def pair_positions(pair: GearPair, s, slots: int | None = None, xp=np):
     slots = pair.pair_slots if slots is None else slots
     age = s[None] + xp.reshape(xp.arange(slots, dtype=s.dtype), (slots,) + (1,) * s.ndim)
     return pair.contact_start_m + pair.base_pitch_m * age, age < pair.contact_ratio
+
+
+def slot_stiffness(pair_stiffness, pair: GearPair, xi_p, in_contact, xp=np):
+    """``k_j`` [N/m] of the slots at `xi_p` (from ``T_1``), the shape of `xi_p`.
+
+    A single-pair model is evaluated at ``xi_p - x_A``; the mesh-level
+    :class:`~.stiffness.RectangularMeshStiffness` shares ``k(s)`` among the pairs `in_contact`.
+    """
+    if isinstance(pair_stiffness, RectangularMeshStiffness):
+        return pair_stiffness.slot_stiffness(in_contact, xp)
+    return pair_stiffness.stiffness(xp.asarray(xi_p) - pair.contact_start_m, xp)
+
+
+def unloaded_ste(phase, amplitude_m=(), phase_rad=(), xp=np):
+    """Unloaded STE ``eps(s) = sum_n A_n cos(2 pi n s + phi_n)`` [m], mesh orders ``n = 1, 2, ...``
+    (as ``GearPairModel.static_transmission_error``), the shape of `phase`."""
+    phase = xp.asarray(phase, dtype=float)
+    eps = 0.0 * phase
+    for order, (amplitude, angle) in enumerate(zip(amplitude_m, phase_rad, strict=True), start=1):
+        eps = eps + amplitude * xp.cos(2 * np.pi * order * phase + angle)
+    return eps
+
+
+def pair_stiffness_max(pair_stiffness, pair: GearPair) -> float:
+    """Largest single-pair stiffness over the path of contact [N/m].
+
+    Sampled at 1001 uniform points of ``[0, x_E - x_A]`` (which hold the mid-path maximum of the
+    ISO parabola) and at a table's nodes inside the path (where a piecewise-linear table has its
+    maximum), so it is exact for the models here; for the rectangular model it is the largest
+    share, ``max(k_max/2, k_min)``.
+    """
+    if isinstance(pair_stiffness, RectangularMeshStiffness):
+        return pair_stiffness.pair_max_N_per_m
+    path = pair.contact_end_m - pair.contact_start_m
+    xi = np.linspace(0.0, path, 1001)
+    if isinstance(pair_stiffness, TablePairStiffness):
+        nodes = np.asarray(pair_stiffness.positions_m)
+        xi = np.concatenate([xi, nodes[(nodes >= 0.0) & (nodes <= path)]])
+    return float(np.max(pair_stiffness.stiffness(xi, np)))
 
 
 def solve_static_contact(stiffness, gap, in_contact, load, xp=np):
@@ -105,18 +164,19 @@ def static_transmission_error(
 
     **Arguments:**
 
-    - `pair_stiffness`: a pair stiffness model (``.stiffness(xi, xp)``, ``xi`` from ``x_A``).
+    - `pair_stiffness`: a pair stiffness model (``.stiffness(xi, xp)``, ``xi`` from ``x_A``), or
+      the mesh-level :class:`~.stiffness.RectangularMeshStiffness` (see :func:`slot_stiffness`).
     - `load_N`: normal load ``N = T_p / R_bp`` [N], a scalar or a 1-D array of loads.
     - `modification`: profile relief (:class:`~.profile.ProfileModification`), default none.
-    - `phases`: mesh phases in [0, 1); default 720 uniform. The mean and peak-to-peak are taken
+    - `phases`: mesh phases in [0, 1); default :data:`DEFAULT_PHASES` uniform. The mean and peak-to-peak are taken
       over these samples, so use a uniform grid that contains the phases of interest.
     - `unloaded_ste_m`: ``eps(s)`` [m], a scalar or an array of the shape of `phases`.
 
     **Returns:** :class:`StaticTE` (numpy).
     """
-    phase = np.arange(720) / 720 if phases is None else np.asarray(phases, dtype=float)
+    phase = np.arange(DEFAULT_PHASES) / DEFAULT_PHASES if phases is None else np.asarray(phases, dtype=float)
     xi_p, in_contact = pair_positions(pair, phase)
-    stiffness = pair_stiffness.stiffness(xi_p - pair.contact_start_m, np)
+    stiffness = slot_stiffness(pair_stiffness, pair, xi_p, in_contact)
     deviation = 0.0 if modification is None else modification.deviation(pair, xi_p, np)
     gap = np.broadcast_to(np.asarray(unloaded_ste_m) + deviation, xi_p.shape)
     load = np.asarray(load_N, dtype=float)
@@ -130,3 +190,73 @@ def harris_map(pair: GearPair, pair_stiffness, loads_N, **options) -> np.ndarray
     `options` as for :func:`static_transmission_error`; all loads are solved at once.
     """
     return static_transmission_error(pair, pair_stiffness, np.asarray(loads_N, dtype=float), **options).p2p_m
+
+
+class LoadedTE(NamedTuple):
+    """Loaded static TE at ``L`` pinion torques over ``n`` mesh phases, ``J`` pair slots (SI)."""
+
+    torque_pinion_Nm: np.ndarray  #: ``T_p`` ``(L,)``
+    load_N: np.ndarray  #: ``N = T_p / R_bp`` ``(L,)``
+    phase: np.ndarray  #: mesh phases ``s`` ``(n,)``
+    position_m: np.ndarray  #: ``xi_p,j - x_A``, from the start of active contact ``(J, n)``
+    in_contact: np.ndarray  #: ``s + j < Gamma`` ``(J, n)``
+    delta_m: np.ndarray  #: loaded TE ``delta_s`` ``(L, n)``
+    pair_loads_N: np.ndarray  #: ``F_j`` ``(L, J, n)``
+    pair_stiffness_N_per_m: np.ndarray  #: ``k_j`` (0 out of contact) ``(L, J, n)``
+    mesh_stiffness_N_per_m: np.ndarray  #: ``dN/d delta_s`` ``(L, n)``
+    p2p_m: np.ndarray  #: peak-to-peak of ``delta_s`` over the phases ``(L,)``
+    mean_m: np.ndarray  #: mean of ``delta_s`` over the phases ``(L,)``
+    mesh_stiffness_mean_N_per_m: np.ndarray  #: mean of ``dN/d delta_s`` over the phases ``(L,)``
+    pair_stiffness_max_N_per_m: np.ndarray  #: :func:`pair_stiffness_max` of each model ``(L,)``
+
+
+def loaded_te_table(
+    pair: GearPair,
+    pair_stiffness,
+    torques_Nm,
+    *,
+    modification: ProfileModification | None = None,
+    phases=None,
+    ste_amplitude_m=(),
+    ste_phase_rad=(),
+) -> LoadedTE:
+    """Loaded static TE of `pair` at each pinion torque (module docstring), as arrays.
+
+    **Arguments:**
+
+    - `pair_stiffness`: one stiffness model for every torque (as for
+      :func:`static_transmission_error`), or a list of one model per torque.
+    - `torques_Nm`: pinion torques ``T_p`` [N m] (> 0); the normal load is ``N = T_p / R_bp``.
+    - `modification`: profile relief, default none. `phases`: as for
+      :func:`static_transmission_error`.
+    - `ste_amplitude_m`, `ste_phase_rad`: the unloaded STE per mesh order (:func:`unloaded_ste`).
+
+    **Returns:** :class:`LoadedTE`.
+    """
+    torques = np.atleast_1d(np.asarray(torques_Nm, dtype=float))
+    models = list(pair_stiffness) if isinstance(pair_stiffness, (list, tuple)) else [pair_stiffness] * torques.size
+    if len(models) != torques.size:
+        raise ValueError(f"{len(models)} stiffness models for {torques.size} torques")
+    phase = np.arange(DEFAULT_PHASES) / DEFAULT_PHASES if phases is None else np.asarray(phases, dtype=float)
+    eps = unloaded_ste(phase, ste_amplitude_m, ste_phase_rad)
+    xi_p, in_contact = pair_positions(pair, phase)
+    loads = torques / pair.base_radius_pinion_m
+    runs = [static_transmission_error(pair, model, load, modification=modification, phases=phase, unloaded_ste_m=eps)
+            for model, load in zip(models, loads)]
+    k_slots = np.stack([np.where(in_contact, slot_stiffness(model, pair, xi_p, in_contact), 0.0) for model in models])
+    k_mesh = np.stack([run.mesh_stiffness_N_per_m for run in runs])
+    return LoadedTE(
+        torque_pinion_Nm=torques,
+        load_N=loads,
+        phase=phase,
+        position_m=xi_p - pair.contact_start_m,
+        in_contact=in_contact,
+        delta_m=np.stack([run.delta_m for run in runs]),
+        pair_loads_N=np.stack([run.pair_loads_N for run in runs]),
+        pair_stiffness_N_per_m=k_slots,
+        mesh_stiffness_N_per_m=k_mesh,
+        p2p_m=np.array([run.p2p_m for run in runs]),
+        mean_m=np.array([run.mean_m for run in runs]),
+        mesh_stiffness_mean_N_per_m=np.mean(k_mesh, axis=-1),
+        pair_stiffness_max_N_per_m=np.array([pair_stiffness_max(model, pair) for model in models]),
+    )

@@ -6,8 +6,9 @@ action measured from the start of active contact (``0 <= xi <= x_E - x_A``). It 
 numpy and jax.numpy arrays alike (``xp``), with no Python branching on array values, so it can
 sit inside a JAX-traced residual.
 
-This module holds the constant model and the user table (with its loader); the ISO 6336-1
-model is in :mod:`hbgear.gear.contact.iso6336`.
+This module holds the constant model and the user table (with its loader), and the paper's
+mesh-level rectangular ``k(s)`` for the static TE of configs that keep it; the ISO 6336-1 model is
+in :mod:`hbgear.gear.contact.iso6336`.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from ..geometry import GearPair
 
 __all__ = [
     "ConstantPairStiffness",
+    "RectangularMeshStiffness",
     "TABLE_COVERAGE_TOLERANCE",
     "TablePairStiffness",
     "load_pair_stiffness_table",
@@ -54,6 +56,35 @@ class ConstantPairStiffness:
     def stiffness(self, xi, xp=np):
         """``k_pair(xi)`` [N/m], the shape of `xi`."""
         return self.stiffness_N_per_m + 0.0 * xp.asarray(xi)
+
+
+@dataclass(frozen=True)
+class RectangularMeshStiffness:
+    """The paper's mesh-level ``k(s)``: ``k_max`` while two pairs are in contact, ``k_min`` while
+    one, shared equally among the pairs in contact.
+
+    With ``k_max != 2 k_min`` this is not a single-pair stiffness (a pair's share depends on how
+    many pairs are in contact, not on its position alone), so it gives every slot's stiffness
+    from the contact pattern: ``k_j = k(s) / n(s)`` on the ``n(s)`` pairs in contact. The loaded
+    static TE is then ``eps + N/k(s)`` (the dynamic model's quasi-static state).
+
+    **Arguments:** `k_max_N_per_m`, `k_min_N_per_m` [N/m] (contact ratios in (1, 2)).
+    """
+
+    k_max_N_per_m: float
+    k_min_N_per_m: float
+
+    def slot_stiffness(self, in_contact, xp=np):
+        """``k_j`` [N/m] of every slot, the shape of `in_contact` (``(slots,) + shape``, bool)."""
+        in_contact = xp.asarray(in_contact)
+        count = xp.sum(in_contact, axis=0)
+        mesh = xp.where(count >= 2, self.k_max_N_per_m, self.k_min_N_per_m)
+        return xp.where(in_contact, mesh / xp.maximum(count, 1), 0.0)
+
+    @property
+    def pair_max_N_per_m(self) -> float:
+        """The largest share a pair carries: ``max(k_max/2, k_min)`` [N/m]."""
+        return max(self.k_max_N_per_m / 2, self.k_min_N_per_m)
 
 
 @dataclass(frozen=True)
