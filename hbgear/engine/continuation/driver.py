@@ -41,7 +41,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 import scipy.linalg
 
-from .newton import newton
+from ..newton import newton
 
 __all__ = ["PseudoArclength", "continuation", "sweep_method", "Branch", "Status", "PointKind"]
 
