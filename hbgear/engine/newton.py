@@ -4,6 +4,10 @@ The residual is scaled (by the static load for the gear pair), so the tolerance 
 the static mesh force. A backtracking line search on ``max |R|`` keeps the step in the basin of
 attraction when friction switches sign; the result always carries the residual reached and a
 :class:`NewtonStatus`, never a silent answer.
+
+This is the one Newton of the engine: :func:`hbgear.engine.continuation` runs it on the bordered
+system of a continuation step (``R(y) = 0``, ``row . y = target``; ``constraints=1``), and its
+compiled corrector is the same algorithm as a JAX loop (the same statuses, by value).
 """
 
 from __future__ import annotations
