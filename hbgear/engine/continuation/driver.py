@@ -15,7 +15,7 @@ import numpy as np
 
 from ..newton import newton
 from .branch import MESSAGES, Branch, PointKind, Status
-from .compiled import _JIT_CACHE, _cached_jit_corrector, _Compiled
+from .compiled import _JIT_CACHE, SegmentControls, _cached_jit_corrector, _Compiled
 from .corrector import _Failure, _Point, _python_corrector
 from .folds import _locate_fold
 from .options import PseudoArclength
@@ -133,8 +133,8 @@ class _Run:
         self.end_scaled = p_end / scale
         self.max_parameter_step = math.inf if method.max_parameter_step is None else method.max_parameter_step
         m = method
-        controls = (m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations, self.max_parameter_step,
-                    p_end / scale, self.direction, p0 / scale)
+        controls = SegmentControls(m.ds_min, m.ds_max, m.max_angle_deg, m.growth, m.target_iterations,
+                                   self.max_parameter_step, p_end / scale, self.direction, p0 / scale)
         self.correct = _Correctors(functions, bound, scale, record.size, m, controls, args, tolerance)
         self.rejected = 0
         self.bar = None
