@@ -139,7 +139,7 @@ def newton(
         if not math.isfinite(norm):
             return NewtonResult(z, NewtonStatus.NONFINITE, iteration, norm, jac)
         r = np.asarray(r)
-        if norm <= tolerance and (end is None or np.all(np.abs(r[end:]) <= constraint_tolerance)):
+        if norm <= tolerance and (end is None or float(np.abs(r[end:]).max()) <= constraint_tolerance):
             return NewtonResult(z, NewtonStatus.CONVERGED, iteration, norm, jac)
         if iteration == max_iterations:
             break
