@@ -55,6 +55,12 @@ def test_validate_agrees_with_time_integration(tmp_path, boundary):
     assert values["speed_rpm"] == pytest.approx(3000.0)
     assert abs(values["rel_diff_rms"]) < 1e-3 and abs(values["rel_diff_p2p"]) < 1e-3
     assert (out / "validation.png").stat().st_size > 0
+    if boundary == "spring":  # the gate: a tolerance below the difference -> exit 3, outputs still written
+        (out / "validation.csv").unlink()
+        tight = max(abs(values["rel_diff_rms"]), abs(values["rel_diff_p2p"])) / 2
+        assert cli.main(argv + ["--tolerance", f"{tight:.3e}"]) == 3
+        with open(out / "validation.csv", newline="") as fh:
+            assert list(csv.reader(fh))[1] == rows[1]
 
 
 @pytest.mark.parametrize("model", ["LTV", "NLTV"])  # exact monodromy / Hill's method

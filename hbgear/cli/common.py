@@ -12,14 +12,16 @@ __all__ = ["add_speed_argument", "model_of", "solve_config", "solution_record"]
 
 
 def add_speed_argument(parser: argparse.ArgumentParser, *, many: bool = False) -> None:
-    """``--speed RPM`` (one, or several with `many`)."""
+    """``--speed RPM`` (one, or several with `many`: ``--speed 3000 5000`` and
+    ``--speed 3000 --speed 5000`` both give two speeds)."""
     parser.add_argument(
         "--speed",
         type=positive_float("--speed", "a positive pinion speed in rpm"),
         required=not many,
         nargs="+" if many else None,
+        action="extend" if many else "store",
         metavar="RPM",
-        help="pinion speed [rpm]" + (" (one or more)" if many else ""),
+        help="pinion speed [rpm]" + (" (one or more; repeated flags add speeds)" if many else ""),
     )
 
 

@@ -1,21 +1,28 @@
-"""``hbgear validate CONFIG [--speed RPM ...]``: harmonic balance against time integration.
+"""``hbgear validate CONFIG [--speed RPM ...] [--tolerance REL]``: harmonic balance against time integration.
 
 At each speed the same model is solved by harmonic balance and integrated in time to steady
 state; ``validation.csv`` lists both RMS and peak-to-peak DTE and their relative differences,
 ``validation.png`` overlays the DTE waveforms over one period and their spectra.
+
+A gate: when ``|HB / TI - 1|`` of the DTE RMS or peak-to-peak exceeds ``--tolerance`` (default
+1e-3) at any speed, the outputs are still written and the command exits with status 3, one
+stderr line naming each speed and quantity that disagree (:class:`hbgear.cli.CheckFailed`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from . import Command, register
+from . import CheckFailed, Command, positive_float, register
 from ..outputs.io import save_figure_atomic, write_csv_atomic
 from ..gear.simulate import simulate
 from ..gear.solve import rpm_to_rad_s
 from .common import add_speed_argument, model_of, solve_config
 
 HEADER = ["speed_rpm", "hb_dte_rms_um", "ti_dte_rms_um", "hb_dte_p2p_um", "ti_dte_p2p_um", "rel_diff_rms", "rel_diff_p2p"]
+
+#: Default of ``--tolerance``: relative difference allowed between HB and TI (DTE RMS and p2p).
+DEFAULT_TOLERANCE = 1e-3
 
 
 def _speeds(config, args):
@@ -86,6 +93,29 @@ def _plot(results, path):
     plt.close(fig)
 
 
+def disagreements(rows, tolerance: float) -> list[str]:
+    """``"<speed> rpm DTE <quantity> <diff> %"`` for every row whose ``|rel_diff_rms|`` or
+    ``|rel_diff_p2p|`` exceeds `tolerance` (or is not finite)."""
+    found = []
+    for row in rows:
+        for name, diff in (("RMS", row[5]), ("p2p", row[6])):
+            if not abs(diff) <= tolerance:  # NaN disagrees too
+                found.append(f"{row[0]:g} rpm DTE {name} HB vs TI {100 * diff:+.4g} %")
+    return found
+
+
+def add_arguments(parser) -> None:
+    add_speed_argument(parser, many=True)
+    parser.add_argument(
+        "--tolerance",
+        type=positive_float("--tolerance", "a positive relative difference, e.g. 1e-3"),
+        default=DEFAULT_TOLERANCE,
+        metavar="REL",
+        help=f"largest |HB/TI - 1| of the DTE RMS and peak-to-peak accepted (default {DEFAULT_TOLERANCE:g}); "
+        "beyond it the command exits with status 3 after writing its outputs",
+    )
+
+
 def run(config, args, out_dir) -> int:
     model = model_of(config)
     results = []
@@ -94,9 +124,13 @@ def run(config, args, out_dir) -> int:
         row = results[-1][0]
         print(f"{speed:g} rpm: DTE rms HB {row[1]:.5g} / TI {row[2]:.5g} um ({100 * row[5]:+.3f} %), "
               f"p2p HB {row[3]:.5g} / TI {row[4]:.5g} um ({100 * row[6]:+.3f} %)")
-    write_csv_atomic(out_dir / "validation.csv", HEADER, [r[0] for r in results])
+    rows = [r[0] for r in results]
+    write_csv_atomic(out_dir / "validation.csv", HEADER, rows)
     _plot(results, out_dir / "validation.png")
+    failed = disagreements(rows, args.tolerance)
+    if failed:
+        raise CheckFailed(f"{'; '.join(failed)} (tolerance {100 * args.tolerance:g} %; outputs written to {out_dir})")
     return 0
 
 
-register(Command("validate", "harmonic balance against time integration at each speed", lambda p: add_speed_argument(p, many=True), run))
+register(Command("validate", "harmonic balance against time integration at each speed", add_arguments, run))
