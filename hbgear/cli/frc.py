@@ -24,7 +24,8 @@ Writes into the output directory (INTERFACE.md), all through :mod:`hbgear.output
 ``H`` is used for the whole curve. Stability: exact monodromy for linear models (batched), and
 for backlash models (otherwise linear) at the points where the teeth never separate (the
 linearisation is exactly the linear model's there); Hill's method per point otherwise, classified
-by :func:`hbgear.engine.floquet.is_stable`; if that module is missing, the Floquet columns are NaN and
+by :func:`hbgear.gear.soft_mode.stable_verdict` (the spring boundary's neutral soft mode
+excluded); if that module is missing, the Floquet columns are NaN and
 `frc.json` says so. If the continuation stops before the stop speed, the curve computed so
 far is still written (with the status in `frc.json`) and the run ends with exit status 1.
 
@@ -275,15 +276,15 @@ def unstable_zones(model, speeds_rad_s, subdivisions: int = ZONE_SCAN_SUBDIVISIO
     ``resolution_rpm`` (the grid step at the zone) and
     ``between_curve_points`` (no point of the curve itself falls inside).
     """
-    from ..engine.floquet import is_stable
     from ..gear.monodromy import multipliers_linear
+    from ..gear.soft_mode import stable_verdicts
 
     p = np.sort(np.asarray(speeds_rad_s, dtype=float))
     frac = np.arange(subdivisions) / subdivisions
     grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
     mult = np.concatenate([np.asarray(multipliers_linear(model, grid[lo:lo + 512]))
                            for lo in range(0, len(grid), 512)])
-    unstable = np.array([not is_stable(m) for m in mult])
+    unstable = ~stable_verdicts(model, grid, mult)
     zones = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):
@@ -312,7 +313,7 @@ def _floquet(hb, system, branch, progress):
     values = np.full(len(branch), np.nan)
     stable = np.full(len(branch), np.nan)
     try:
-        from ..engine.floquet import is_stable
+        from ..gear.soft_mode import stable_verdict
         multipliers, method, warning = _multipliers(hb, system, np.asarray(branch.p), np.asarray(branch.z), progress)
     except ImportError as exc:  # not there yet: NaN columns and a warning
         return values, stable, None, f"Floquet multipliers not computed: hbgear.engine.floquet unavailable ({exc})", \
@@ -320,7 +321,7 @@ def _floquet(hb, system, branch, progress):
     for i, m in enumerate(multipliers):
         if m is not None:
             values[i] = float(np.max(np.abs(m))) if m.size else 0.0
-            stable[i] = float(is_stable(m))
+            stable[i] = float(stable_verdict(system.model, branch.p[i], m, hb.nu))
     return values, stable, method, warning, multipliers
 
 
@@ -560,7 +561,7 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
 
     **Returns:** ``(records for frc.json, rows for frc.csv, plot data per branch)``.
     """
-    from ..engine.floquet import is_stable
+    from ..gear.soft_mode import stable_verdict
 
     so, sw = config.solver, config.sweep
     flags = _pd_flags(multipliers)
@@ -619,7 +620,7 @@ def _period_doubling(model, hb, system, branch, multipliers, *, harmonics, sampl
                 read = read_outs(model, omega, zs, hb2)
                 for i, (w, r, m) in enumerate(zip(omega, res, mults)):
                     floq = np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0)
-                    st = np.nan if m is None else int(is_stable(m))
+                    st = np.nan if m is None else int(stable_verdict(model, w, m, 2))
                     block.append([float(rad_s_to_rpm(w)), float(w) * model.teeth_pinion / (2 * math.pi),
                                   *(float(read[key][i]) for key in ("dte_mean_um", "dte_rms_um", "dte_p2p_um",
                                                                     "dynamic_factor")),
@@ -819,8 +820,9 @@ def run(config, args, out_dir) -> int:
             "available": bool(np.all(np.isfinite(floquet))),
             "method": stability_method,
             "warning": stability_warning,
-            "criterion": "hbgear.engine.floquet.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
-            "max_abs_floquet is over the base period (nu mesh periods)",
+            "criterion": "hbgear.gear.soft_mode.stable_verdict: all |multipliers| <= 1 + 1e-9 (trivial ones removed; "
+            "the spring boundary's neutral soft-mode pair, within 1e-5 of exp(+-i w_b T), excluded); "
+            "max_abs_floquet is over the base period (nu mesh periods), all multipliers",
             "unstable_points": int(np.sum(stable == 0)),
             "unstable_zones": zones,
             "unstable_zones_rule": zones_rule,

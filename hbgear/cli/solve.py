@@ -12,7 +12,7 @@ import numpy as np
 from . import Command, register
 from ..outputs.io import write_csv_atomic, write_json_atomic
 from ..gear.model import PAIR_SLOTS
-from ..engine.floquet import is_stable
+from ..gear.soft_mode import split_soft_mode, stable_verdict
 from .common import add_speed_argument, floquet_of, model_of, solution_record, solve_config
 
 
@@ -48,8 +48,12 @@ def run(config, args, out_dir) -> int:
     multipliers = floquet_of(solution)
     record = solution_record(solution)
     record["max_abs_floquet"] = float(np.max(np.abs(multipliers))) if multipliers.size else 0.0
-    record["stable"] = is_stable(multipliers)  # the criterion frc uses
+    w, nu = solution.omega_pinion, solution.nu
+    record["stable"] = stable_verdict(model, w, multipliers, nu)  # the criterion frc uses
     record["floquet_multipliers"] = [[float(m.real), float(m.imag)] for m in multipliers]
+    # the spring boundary's neutral soft mode, excluded from "stable" (hbgear.gear.soft_mode)
+    record["neutral_soft_mode_multipliers"] = [[float(m.real), float(m.imag)]
+                                               for m in split_soft_mode(model, w, multipliers, nu)[1]]
     record["config"] = config.to_dict()
     write_csv_atomic(
         out_dir / "harmonics.csv",

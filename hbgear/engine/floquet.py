@@ -37,6 +37,8 @@ __all__ = [
     "max_abs_multiplier",
     "most_negative_real",
     "period_doubling",
+    "neutral_mask",
+    "split_neutral",
 ]
 
 #: Multipliers within this distance of 1 (exponents within ``TRIVIAL_TOL/(2 pi)`` of 0, in
@@ -76,6 +78,36 @@ def is_stable(multipliers, tol: float = 1e-9) -> bool:
     """
     value = max_abs_multiplier(multipliers)
     return bool(np.isfinite(value) and value <= 1.0 + tol)
+
+
+def neutral_mask(multipliers, neutral, tol: float) -> np.ndarray:
+    """Which multipliers belong to modes a system knows to be neutral.
+
+    For each value of `neutral` (e.g. ``exp(+-i w T)`` of an undamped mode the system adds by
+    construction) the nearest multiplier not yet taken is marked if it lies within `tol` of it.
+    Batched: `multipliers` ``(..., k)`` and `neutral` ``(..., t)`` with the same leading shape.
+
+    **Returns:** a boolean mask of the shape of `multipliers`.
+    """
+    m = np.asarray(multipliers)
+    targets = np.asarray(neutral)
+    mask = np.zeros(m.shape, dtype=bool)
+    if m.shape[-1] == 0:
+        return mask
+    for j in range(targets.shape[-1]):
+        distance = np.where(mask, np.inf, np.abs(m - targets[..., j:j + 1]))
+        nearest = np.argmin(distance, axis=-1)[..., None]
+        hit = np.take_along_axis(distance, nearest, axis=-1) <= tol
+        np.put_along_axis(mask, nearest, np.take_along_axis(mask, nearest, axis=-1) | hit, axis=-1)
+    return mask
+
+
+def split_neutral(multipliers, neutral, tol: float):
+    """``(others, taken)`` of one set of multipliers: the multipliers less those of known neutral
+    modes (:func:`neutral_mask`, order kept), and those; the verdict is :func:`is_stable` of ``others``."""
+    m = np.asarray(multipliers)
+    mask = neutral_mask(m, neutral, tol)
+    return m[~mask], m[mask]
 
 
 def period_doubling(multipliers, tol: float = 1e-9) -> bool:
