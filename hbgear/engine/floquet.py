@@ -36,8 +36,8 @@ __all__ = [
     "is_stable",
     "max_abs_multiplier",
     "most_negative_real",
-    "period_doubling",
     "neutral_mask",
+    "period_doubling",
     "split_neutral",
 ]
 
