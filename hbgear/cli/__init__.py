@@ -14,7 +14,9 @@ answer at once; command modules import their heavy dependencies inside `run`.
 Exit status: 0 success (or what `run` returns); 2 bad input -- a
 :class:`~hbgear.errors.ConfigError` or a usage error -- with exactly one line
 `hbgear: error: <message>` on stderr; 1 a :class:`~hbgear.errors.ConvergenceError`
-(`hbgear: did not converge: <message>`); 130 interrupted (Ctrl-C).
+(`hbgear: did not converge: <message>`); 3 a :class:`CheckFailed` raised by a command after
+writing its outputs (`hbgear validate`: HB and time integration disagree; `hbgear: validation
+failed: <message>`); 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from ..outputs.io import prepare_out_dir
 
 __all__ = [
     "COMMANDS",
+    "CheckFailed",
     "Command",
     "build_parser",
     "check_positive",
@@ -47,7 +50,11 @@ __all__ = [
 ]
 
 PROG = "hbgear"
-EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+class CheckFailed(Exception):
+    """A command's check did not hold (its outputs are written): exit 3, one stderr line."""
 
 
 @dataclass(frozen=True)
@@ -177,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Steady-state vibration of a spur-gear pair with tooth friction, by "
         "harmonic balance and time integration.",
-        epilog="Exit status: 0 success, 1 did not converge, 2 bad input, 130 interrupted.",
+        epilog="Exit status: 0 success, 1 did not converge, 2 bad input, 3 validation failed, 130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
@@ -245,6 +252,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConvergenceError as exc:
         _remove_if_empty(out_dir, created)
         return _fail("did not converge", exc, EXIT_NOT_CONVERGED)
+    except CheckFailed as exc:
+        return _fail("validation failed", exc, EXIT_CHECK_FAILED)
     except KeyboardInterrupt:
         _remove_if_empty(out_dir, created)
         return _fail("interrupted", "stopped by the user (no partial files written)", 130)

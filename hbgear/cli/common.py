@@ -13,20 +13,13 @@ from . import positive_float
 __all__ = ["add_speed_argument", "solve_config", "solution_record"]
 
 
-class _AppendSpeeds(argparse.Action):
-    """``--speed A B --speed C`` -> ``[A, B, C]`` (repeated flags add speeds)."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        current = list(getattr(namespace, self.dest, None) or [])
-        setattr(namespace, self.dest, current + list(values))
-
-
 def add_speed_argument(parser: argparse.ArgumentParser, *, many: bool = False) -> None:
-    """``--speed RPM`` (one; or, with `many`, one or more, repeatable)."""
+    """``--speed RPM`` (one, or several with `many`: ``--speed 3000 5000`` and
+    ``--speed 3000 --speed 5000`` both give two speeds)."""
     speed = positive_float("--speed", "a positive pinion speed in rpm")
     if many:
-        parser.add_argument("--speed", type=speed, nargs="+", action=_AppendSpeeds, default=None, metavar="RPM",
-                            help="pinion speed [rpm] (one or more; repeatable)")
+        parser.add_argument("--speed", type=speed, nargs="+", action="extend", default=None, metavar="RPM",
+                            help="pinion speed [rpm] (one or more; repeated flags add speeds)")
     else:
         parser.add_argument("--speed", type=speed, required=True, metavar="RPM", help="pinion speed [rpm]")
 
@@ -58,8 +51,12 @@ def solution_record(solution) -> dict:
         if solution.model.boundary == "reaction" else None,
     }
     if solution.multipliers is not None:
-        from ..engine.floquet import is_stable
+        from ..engine.floquet import TRIVIAL_TOL, split_neutral, stable_verdict
 
-        record["stable"] = is_stable(solution.multipliers)  # the criterion frc uses
-        record["floquet_multipliers"] = [[float(m.real), float(m.imag)] for m in solution.multipliers]
+        m, system, p = solution.multipliers, solution.system, solution.parameter
+        record["stable"] = stable_verdict(system, p, m, solution.nu)  # the criterion frc uses
+        record["floquet_multipliers"] = [[float(x.real), float(x.imag)] for x in m]
+        # the spring boundary's neutral soft mode, left out of "stable" (hbgear.gear.soft_mode)
+        neutral = split_neutral(m, system.neutral_multipliers(p, solution.nu), TRIVIAL_TOL)[1]
+        record["neutral_soft_mode_multipliers"] = [[float(x.real), float(x.imag)] for x in neutral]
     return record

@@ -77,8 +77,9 @@ def _summary(curve, config, args, method_options, timings) -> dict:
             "available": stab is not None and bool(np.all(np.isfinite(curve.max_abs_floquet[:curve.points]))),
             "method": None if stab is None else stab.method,
             "warning": "Floquet multipliers skipped (--no-stability)" if stab is None else stab.warning,
-            "criterion": "hbgear.engine.floquet.is_stable: all |multipliers| <= 1 + 1e-9 (trivial ones removed); "
-                         "max_abs_floquet is over the base period (nu mesh periods)",
+            "criterion": "hbgear.engine.floquet.stable_verdict: all |multipliers| <= 1 + 1e-9 (trivial ones removed; "
+                         "the spring boundary's neutral soft-mode pair, within 1e-5 of exp(+-i w_b T), excluded); "
+                         "max_abs_floquet is over the base period (nu mesh periods), all multipliers",
             "unstable_points": unstable, "unstable_zones": curve.unstable_zones,
             "unstable_zones_rule": curve.zones_rule,
         },

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .floquet import hill_multipliers, hill_multipliers_batch, is_stable
+from .floquet import hill_multipliers, hill_multipliers_batch, stable_verdict
 
 __all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
            "ZONE_SCAN_SUBDIVISIONS"]
@@ -93,7 +93,8 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
     """Floquet multipliers over the base period at every point ``(ps[i], zs[i])`` of a branch of
     `system` discretised by `hb` (module docstring: exact monodromy where it applies, else Hill).
 
-    **Returns:** a :class:`BranchStability`; stability by :func:`~hbgear.engine.floquet.is_stable`.
+    **Returns:** a :class:`BranchStability`; stability by :func:`~hbgear.engine.floquet.stable_verdict`
+    (the system's known neutral modes left out).
     """
     ps, zs = np.asarray(ps, dtype=float), np.asarray(zs, dtype=float)
     n = len(ps)
@@ -124,7 +125,8 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
         warning = ((fallback + "; ") if fallback else "") + (
             f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
     max_abs = np.array([np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0) for m in out])
-    stable = np.array([np.nan if m is None else float(is_stable(m)) for m in out])
+    stable = np.array([np.nan if m is None else float(stable_verdict(system, float(p), m, hb.nu))
+                       for p, m in zip(ps, out)])
     return BranchStability(out, max_abs, stable, method, warning)
 
 
@@ -151,7 +153,7 @@ def unstable_zones(system, ps, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> li
     frac = np.arange(subdivisions) / subdivisions
     grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
     mult = np.concatenate([np.asarray(multipliers_linear(system, grid[lo:lo + 512])) for lo in range(0, len(grid), 512)])
-    unstable = np.array([not is_stable(m) for m in mult])
+    unstable = np.array([not stable_verdict(system, float(p), m) for p, m in zip(grid, mult)])
     zones = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):

@@ -66,6 +66,11 @@ shapes returned, ``is_linear`` at a probe state):
   exponentials.
 - ``frequency_scale(p)`` -- a typical natural frequency [rad/s] (default: ``w_exc(p)``), the
   velocity scale that balances the monodromy matrix (a similarity: it changes rounding only).
+- ``neutral_multipliers(p, nu)`` -- multipliers of modes the system adds by construction and knows
+  to be neutral (e.g. an undamped soft spring standing for a free rotation: ``exp(+-i w T)``),
+  shape ``np.shape(p) + (t,)``; the multiplier nearest each, within
+  :data:`~hbgear.engine.floquet.TRIVIAL_TOL`, is reported but left out of the stability verdict
+  (default: none).
 - ``linearization()`` / ``in_linear_regime(hb, z, p)`` -- a linear system whose variational
   equations are this system's along every solution for which ``in_linear_regime`` is true (the
   gear pair with backlash while its teeth keep contact); there the exact monodromy of the linear
@@ -118,6 +123,11 @@ class PeriodicSystem:
     def frequency_scale(self, p):
         """A typical natural frequency [rad/s] (balancing of monodromy matrices); ``w_exc(p)``."""
         return self.excitation_frequency(p)
+
+    def neutral_multipliers(self, p, nu: int = 1):
+        """Known neutral multipliers over the base period (``nu`` excitation periods), shape
+        ``np.shape(p) + (t,)``; none by default."""
+        return np.zeros(np.shape(p) + (0,), dtype=complex)
 
     def linearization(self) -> PeriodicSystem | None:
         """The linear system whose variational equations are this one's in its linear regime."""

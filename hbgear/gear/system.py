@@ -96,6 +96,14 @@ class GearSystem(PeriodicSystem):
         model, _ = self._at(p)
         return float(np.sqrt(float(model.k_mean_N_per_m) / float(model.mass_equivalent_kg)))
 
+    def neutral_multipliers(self, p, nu: int = 1):
+        """The spring boundary's undamped soft mode ``exp(+-i w_b T)`` (:mod:`hbgear.gear.soft_mode`)."""
+        from .soft_mode import soft_mode_estimate
+
+        model, omega = self._at(p)
+        omega = np.broadcast_to(np.asarray(omega, dtype=float), np.shape(p))
+        return soft_mode_estimate(model, omega, nu)
+
     def linearization(self):
         """The linear model itself, or for a backlash model (otherwise linear) the same model with
         teeth that never separate: ``g(x)`` has slope 1 outside the dead zone, so along a solution
