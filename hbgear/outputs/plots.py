@@ -197,15 +197,20 @@ def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | Non
 
 def _resonance_ranges(ax, resonance) -> None:
     """ISO 6336-1 ranges of the resonance ratio on `ax` (pinion speed axis): ``n_E1`` and the main
-    resonance range shaded, the intermediate range lighter, the ranges named at the top."""
+    resonance range shaded, the intermediate range lighter, the ranges named at the top; legend
+    entries only for what lies in the axis' speed range."""
     lo, hi = ax.get_xlim()
     n_e1 = resonance.n_E1_rpm
-    ax.axvspan(*resonance.main_resonance_rpm, color="tab:orange", alpha=0.22, lw=0,
-               label=f"main resonance range {resonance.N_S:g} < N <= 1.15")
-    ax.axvspan(*resonance.intermediate_rpm, color="tab:orange", alpha=0.08, lw=0, label="intermediate 1.15 < N < 1.5")
-    ax.axvline(n_e1, color="tab:orange", lw=1.2, label=f"n_E1 = {n_e1:.0f} rpm (ISO 6336-1)")
-    names = (("subcritical ", resonance.subcritical_rpm, "right"), ("main", resonance.main_resonance_rpm, "center"),
-             ("interm.", resonance.intermediate_rpm, "center"), (" supercritical", resonance.supercritical_rpm, "left"))
+    seen = lambda a, b: min(b, hi) > max(a, lo)  # noqa: E731
+    main, intermediate = resonance.main_resonance_rpm, resonance.intermediate_rpm
+    ax.axvspan(*main, color="tab:orange", alpha=0.22, lw=0,
+               label=f"main resonance range {resonance.N_S:g} < N <= 1.15" if seen(*main) else None)
+    ax.axvspan(*intermediate, color="tab:orange", alpha=0.08, lw=0,
+               label="intermediate 1.15 < N < 1.5" if seen(*intermediate) else None)
+    ax.axvline(n_e1, color="tab:orange", lw=1.2,
+               label=f"n_E1 = {n_e1:.0f} rpm (ISO 6336-1)" if lo <= n_e1 <= hi else None)
+    names = (("subcritical ", resonance.subcritical_rpm, "right"), ("main", main, "center"),
+             ("interm.", intermediate, "center"), (" supercritical", resonance.supercritical_rpm, "left"))
     for name, (a, b), align in names:
         a, b = max(a, lo), min(b, hi)
         if b > a:
@@ -240,7 +245,7 @@ def dynamic_factor_figure(curve, resonance, title: str | None = None):
     ax.set_xlabel("pinion speed [rpm]")
     ax.set_ylabel("dynamic factor max F_mesh / (T_p / R_bp) [-]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, loc="best")
     fig.suptitle(title or f"dynamic factor: peak {factor[peak]:.3g} at {speed[peak]:.0f} rpm "
                  f"(N = {speed[peak] / resonance.n_E1_rpm:.3f})", fontsize=10)
     return fig
