@@ -34,6 +34,25 @@ class FrequencyResponse(_gear.GearFrequencyResponse):
 
         return frc_figure(self, title)
 
+    def plot_orders(self, orders=None, title: str | None = None):
+        """The ``orders.png`` figure: DTE order lines against speed and the speed x order map (dB re 1 um)."""
+        from .outputs.plots import orders_figure
+
+        orders = self.mesh_orders() if orders is None else orders
+        return orders_figure(self, orders, self.order_amplitudes_um(orders), self.resonance, title)
+
+    def plot_dynamic_factor(self, title: str | None = None):
+        """The ``dynamic_factor.png`` figure: ``max F_mesh / N`` against speed with ISO 6336-1's ``n_E1`` and ranges."""
+        from .outputs.plots import dynamic_factor_figure
+
+        return dynamic_factor_figure(self, self.resonance, title)
+
+    def plot_floquet(self, points=None, title: str | None = None):
+        """The ``floquet.png`` figure: the multipliers of :meth:`floquet_points` (or `points`) and the unit circle."""
+        from .outputs.plots import floquet_figure
+
+        return floquet_figure(self, self.floquet_points() if points is None else points, title)
+
 
 class SystemFrequencyResponse(_engine.FrequencyResponse):
     """A periodic system's curve (:class:`~hbgear.engine.response.FrequencyResponse`) with :meth:`plot`."""

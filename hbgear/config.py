@@ -339,7 +339,8 @@ class SweepConfig:
     **Fields:** `speed_rpm_start`, `speed_rpm_stop` [rpm] (either may be larger);
     `max_points` [-]; `step_rpm` [rpm] (initial continuation step, or `None` for automatic);
     `period_doubling`: follow the nu = 2 branch at each period doubling -- ``True``, ``False`` or
-    ``None`` for "auto" (only where the nu = 2 problem is small; crossings are always located).
+    ``None`` for "auto" (only where the nu = 2 problem is small; crossings are always located);
+    `orders`: mesh orders 1..K in orders.csv (`None`: min(H / nu, 10)).
     """
 
     speed_rpm_start: float = 1000.0
@@ -347,6 +348,7 @@ class SweepConfig:
     max_points: int = 4000
     step_rpm: float | None = None
     period_doubling: bool | None = None
+    orders: int | None = None
 
     def __post_init__(self):
         if self.speed_rpm_start == self.speed_rpm_stop:
@@ -852,7 +854,8 @@ _sweep = _section("sweep", SweepConfig, {
     "max_points": _Key("max_points", _int(2)),
     "step_rpm": _Key("step_rpm", _num(0.0, what="a positive step in rpm")),
     "period_doubling": _Key("period_doubling", _bool_or_auto),
-})  # start != stop is checked by SweepConfig itself
+    "orders": _Key("orders", _int(1, MAX_HARMONICS)),
+})  # start != stop is checked by SweepConfig itself; orders <= H / nu by the frc command
 _map = _section("map", MapConfig, {
     "speed_rpm_start": _Key("speed_rpm_start", _SPEED),
     "speed_rpm_stop": _Key("speed_rpm_stop", _SPEED),

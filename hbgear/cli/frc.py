@@ -6,10 +6,17 @@ Load -> build -> :func:`hbgear.frequency_response` -> write, into the output dir
   speed going back; located folds are rows of their own), then the rows of every period-doubled
   branch (``nu = 2``), each in path order from its bifurcation;
 - ``floquet.csv``: every Floquet multiplier of every ``nu = 1`` point (not with ``--no-stability``);
+- ``orders.csv``: per ``frc.csv`` row, the DTE amplitude at mesh orders 1..K (``[sweep] orders``,
+  default ``min(H / nu, 10)``) and, when there are ``nu = 2`` rows, at the half orders
+  (:meth:`~hbgear.gear.response.GearFrequencyResponse.order_rows`);
 - ``frc.json``: status and message, ``H`` and how it was chosen, folds, stability (method,
   unstable points, the exact scan's unstable zones), period doublings, continuation settings,
-  timings, the config;
-- ``frc.png``: the curve (:func:`hbgear.outputs.plots.frc_figure`).
+  the mesh orders, the ISO 6336-1 resonance speed ``n_E1`` and its ranges, the points of
+  ``floquet.png``, timings, the config;
+- ``frc.png``: the curve (:func:`hbgear.outputs.plots.frc_figure`); ``orders.png``: order tracking
+  (order lines and the speed x order map); ``dynamic_factor.png``: ``max F_mesh / N`` with ``n_E1``
+  and its ranges; ``floquet.png``: the multipliers of a few selected points on the unit circle
+  (not with ``--no-stability``).
 
 If the continuation stops before the stop speed, the curve so far is written (with the status in
 ``frc.json``) and the run ends with exit status 1.
@@ -52,7 +59,31 @@ def period_doubling_enabled(config, args, model, harmonics, nu) -> tuple[bool, b
     return locate, follow, f"{why} ({source})" if why in ("on", "off") else why
 
 
-def _summary(curve, config, args, method_options, timings) -> dict:
+def validate(config, args) -> None:
+    """``sweep.orders`` within the harmonics of the config (checked before anything runs)."""
+    from ..errors import ConfigError
+
+    orders, so = config.sweep.orders, config.solver
+    if orders is not None and so.harmonics is not None and orders * so.subharmonic > so.harmonics:
+        raise ConfigError("sweep.orders", orders, f"an integer <= solver.harmonics / solver.subharmonic = "
+                          f"{so.harmonics // so.subharmonic} (mesh orders beyond it are not in the solution)")
+
+
+def _order_count(config, curve) -> tuple[int | None, str]:
+    """``(K or None for the default, how it was chosen)``: ``sweep.orders``, capped at ``H // nu``
+    when ``H`` was chosen automatically."""
+    from ..gear.response import DEFAULT_ORDERS
+
+    limit = curve.harmonics // curve.response.hb.nu
+    requested = config.sweep.orders
+    if requested is None:
+        return None, f"default: min(H // nu, {DEFAULT_ORDERS})"
+    if requested > limit:
+        return limit, f"sweep.orders = {requested} capped at H // nu = {limit} (H chosen automatically)"
+    return requested, "sweep.orders"
+
+
+def _summary(curve, config, args, method_options, timings, orders=None) -> dict:
     """The ``frc.json`` record of a curve."""
     import numpy as np
 
@@ -84,6 +115,8 @@ def _summary(curve, config, args, method_options, timings) -> dict:
             "unstable_zones_rule": curve.zones_rule,
         },
         "period_doubling_rule": pd_rule, "period_doubling": curve.period_doublings,
+        "orders": orders, "iso6336_resonance": curve.resonance.as_dict(),
+        "floquet_points": [] if stab is None else curve.floquet_points(),
         "continuation": method_options | {"method": "pseudo-arclength", "parameter": "pinion speed [rad/s]"},
         "model": {"coupling": model.coupling, "formulation": model.formulation, "boundary": model.boundary,
                   "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof},
@@ -142,12 +175,20 @@ def run(config, args, out_dir) -> int:
     if curve.response.stability is not None:
         write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, curve.floquet_rows())
     save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
+    count, order_rule = _order_count(config, curve)
+    orders = curve.mesh_orders(count)
+    write_csv_atomic(out_dir / "orders.csv", *curve.order_rows(orders))
+    save_figure_atomic(curve.plot_orders(orders), out_dir / "orders.png", dpi=120)
+    save_figure_atomic(curve.plot_dynamic_factor(), out_dir / "dynamic_factor.png", dpi=120)
+    if curve.response.stability is not None:
+        save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
     t_out = time.perf_counter()
     method = sweep_method(rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop),
                           None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm))
     timings = dict(curve.timings_s) | {"per_point_ms": 1e3 * curve.timings_s["continuation"] / max(curve.points - 1, 1),
                                        "outputs": t_out - t_done, "total": time.perf_counter() - t0}
-    write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings))
+    write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings,
+                                                     {"mesh_orders": orders, "rule": order_rule}))
     if not curve.success:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "
@@ -158,4 +199,5 @@ def run(config, args, out_dir) -> int:
 
 
 FRC = register(Command(name="frc", help="frequency-response curve by arc-length continuation over [sweep] "
-                       "(frc.csv/.json/.png)", add_arguments=add_arguments, run=run))
+                       "(frc.csv/.json/.png, orders.csv/.png, dynamic_factor.png, floquet.png)",
+                       add_arguments=add_arguments, run=run, validate=validate))

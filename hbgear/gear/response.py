@@ -5,7 +5,9 @@
 :func:`~hbgear.gear.solve.solve_periodic` (quasi-static state, the LTV solution, smoothing
 continuation) where Newton from a guess does not do, ``harmonics = None`` for the automatic
 count, the rule that decides when ``nu = 2`` branches are followed, and the read-outs of every
-point (DTE mean/RMS/peak-to-peak, dynamic factor) in the units of ``frc.csv``.
+point (DTE mean/RMS/peak-to-peak, dynamic factor) in the units of ``frc.csv``, the DTE at mesh
+orders (``orders.csv``), the points whose Floquet multipliers ``floquet.png`` shows, and the
+ISO 6336-1 resonance speed of the pair.
 """
 
 from __future__ import annotations
@@ -19,11 +21,14 @@ import numpy as np
 from ..engine.response import FrequencyResponse, solution_multipliers
 from ..engine.response import frequency_response as engine_frequency_response
 from .model import GearPairModel
+from .readouts import order_amplitudes
+from .resonance import ResonanceRanges, iso6336_resonance
 from .solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, solve_periodic, start_guess
 from .system import GearSystem
 
-__all__ = ["COLUMNS", "FLOQUET_COLUMNS", "PD_AUTO_MAX_UNKNOWNS", "GearFrequencyResponse", "frequency_response",
-           "period_doubling_rule", "solve", "unstable_zones"]
+__all__ = ["COLUMNS", "DEFAULT_ORDERS", "FLOQUET_COLUMNS", "FLOQUET_POINTS", "ORDER_KEY_COLUMNS",
+           "PD_AUTO_MAX_UNKNOWNS", "GearFrequencyResponse", "frequency_response", "order_column", "period_doubling_rule",
+           "solve", "unstable_zones"]
 
 #: Columns of ``frc.csv`` (and of :meth:`GearFrequencyResponse.table`), in order.
 COLUMNS = ("speed_rpm", "mesh_freq_hz", "dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor",
@@ -32,6 +37,23 @@ COLUMNS = ("speed_rpm", "mesh_freq_hz", "dte_mean_um", "dte_rms_um", "dte_p2p_um
 #: Columns of ``floquet.csv``: one row per multiplier of every ``nu = 1`` point, ``row`` the
 #: point's data row in ``frc.csv`` (0 = first), multipliers over the base period, largest first.
 FLOQUET_COLUMNS = ("row", "speed_rpm", "index", "multiplier_re", "multiplier_im", "multiplier_abs")
+
+#: The first columns of ``orders.csv`` (one row per ``frc.csv`` row, ``row`` its index from 0);
+#: the amplitude columns follow, named by :func:`order_column`.
+ORDER_KEY_COLUMNS = ("row", "speed_rpm", "mesh_freq_hz", "nu")
+
+#: Mesh orders of ``orders.csv`` by default: ``1 .. min(H / nu, DEFAULT_ORDERS)``.
+DEFAULT_ORDERS = 10
+
+#: At most this many points in ``floquet.png`` (:meth:`GearFrequencyResponse.floquet_points`).
+FLOQUET_POINTS = 6
+
+
+def order_column(order: float, quantity: str = "dte", unit: str = "um") -> str:
+    """The ``orders.csv`` column of `quantity` at a mesh order: ``dte_order_2_um``, and for a half
+    order the point written ``p`` (``dte_order_0p5_um``, ``dte_order_1p5_um``)."""
+    return f"{quantity}_order_{float(order):g}_{unit}".replace(".", "p")
+
 
 #: The ``nu = 2`` branches of a ``nu = 1`` curve are followed by default (``"auto"``) when the
 #: model is non-linear in its contact (backlash bounds the branch) and the ``nu = 2`` problem has
@@ -123,7 +145,9 @@ class GearFrequencyResponse:
 
     **Derived:** the columns as attributes (`speed_rpm`, `dte_rms_um`, `stable`, `nu`, ...),
     `folds` (fold speeds [rpm]), `fold_records`, `period_doublings` and `unstable_zones` (in rpm),
-    :meth:`rows` (``frc.csv`` dicts), :meth:`floquet_rows`, :meth:`solution`.
+    `resonance` (ISO 6336-1 ``n_E1`` and its ranges), :meth:`rows` (``frc.csv`` dicts),
+    :meth:`floquet_rows`, :meth:`mesh_orders`, :meth:`order_amplitudes_um`, :meth:`order_rows`
+    (``orders.csv``), :meth:`floquet_points`, :meth:`solution`.
     """
 
     model: GearPairModel
@@ -205,6 +229,91 @@ class GearFrequencyResponse:
             for k, m in enumerate(mult[np.argsort(-np.abs(mult), kind="stable")]):
                 rows.append([row, float(rpm), k, float(m.real), float(m.imag), float(abs(m))])
         return rows
+
+    @property
+    def resonance(self) -> ResonanceRanges:
+        """The ISO 6336-1 main resonance speed ``n_E1`` of the pair and its speed ranges
+        (:func:`~hbgear.gear.resonance.iso6336_resonance`)."""
+        return iso6336_resonance(self.model)
+
+    def mesh_orders(self, count: int | None = None) -> np.ndarray:
+        """The mesh orders of ``orders.csv``: ``1 .. K``, ``K = count`` (default
+        ``min(H // nu, DEFAULT_ORDERS)`` of the ``nu`` branch), then the half orders
+        ``0.5 .. K - 0.5`` when any row repeats over two mesh periods (``nu = 2``).
+
+        **Raises:** ``ValueError`` when ``K nu > H`` (order ``K`` not in the curve's basis).
+        """
+        hb = self.response.hb
+        limit = hb.harmonics // hb.nu
+        k = min(limit, DEFAULT_ORDERS) if count is None else int(count)
+        if not 1 <= k <= limit:
+            raise ValueError(f"{k} mesh orders: between 1 and H // nu = {limit} (H = {hb.harmonics}, nu = {hb.nu})")
+        orders = np.arange(1.0, k + 1.0)
+        return np.concatenate([orders, orders - 0.5]) if np.any(self.nu == 2) else orders
+
+    def order_amplitudes_um(self, orders=None) -> np.ndarray:
+        """DTE amplitude [um] at each mesh order (default :meth:`mesh_orders`) of every row of the
+        table, shape ``(rows, orders)``, straight from the harmonic-balance coefficients
+        (:func:`~hbgear.gear.readouts.order_amplitudes`); 0 at half orders on ``nu = 1`` rows."""
+        orders = self.mesh_orders() if orders is None else np.asarray(orders, dtype=float)
+        r = self.response
+        parts = [(r.hb, r.branch.z)] + [(d.hb, d.z) for d in r.doubled]
+        amplitudes = [1e6 * order_amplitudes(hb.decode(r.system, z)[0], hb.nu, orders)
+                      for hb, z in parts if len(z)]
+        return np.concatenate(amplitudes) if amplitudes else np.zeros((0, len(orders)))
+
+    def order_rows(self, orders=None) -> tuple[list[str], list[list]]:
+        """``orders.csv``: the header (:data:`ORDER_KEY_COLUMNS`, then :func:`order_column` of each
+        order) and one row per ``frc.csv`` row, in its order."""
+        orders = self.mesh_orders() if orders is None else np.asarray(orders, dtype=float)
+        amplitudes = self.order_amplitudes_um(orders)
+        speed, freq, nu = self.speed_rpm, self.mesh_freq_hz, self.nu
+        rows = [[i, float(speed[i]), float(freq[i]), int(nu[i]), *amplitudes[i].tolist()] for i in range(len(self))]
+        return [*ORDER_KEY_COLUMNS, *(order_column(o) for o in orders)], rows
+
+    def floquet_points(self, limit: int = FLOQUET_POINTS) -> list[dict]:
+        """The points of the ``nu`` branch whose multipliers ``floquet.png`` shows: at most `limit`
+        with known multipliers, taken in this order (a point already taken is skipped):
+
+        1. the most unstable point (largest ``max |multiplier|``), if any point is unstable;
+        2. the stable point of largest DTE peak-to-peak (the resonance peak, where it is stable);
+        3. at each located period doubling, in path order, the curve point on its unstable side;
+        4. each fold point;
+        5. at each period doubling, the curve point on its stable side.
+
+        **Returns:** dicts ``row`` (the ``frc.csv`` row), ``speed_rpm``, ``max_abs_floquet``,
+        ``reason``, sorted by speed.
+        """
+        n, r = self.points, self.response
+        known = [i for i in range(n) if r.multipliers[i] is not None and np.size(r.multipliers[i])]
+        usable, picks = set(known), {}
+
+        def take(i, reason):
+            if i in usable and i not in picks and len(picks) < limit:
+                picks[i] = reason
+
+        def sides(rec):
+            """``(unstable-side row, stable-side row)`` of a crossing's bracket."""
+            i, j = rec["bracket_rows"]
+            higher, lower = (j, i) if r.branch.p[j] > r.branch.p[i] else (i, j)
+            return (higher, lower) if rec["unstable_side"] == "above" else (lower, higher)
+
+        stable, max_abs = self.stable[:n], self.max_abs_floquet[:n]
+        unstable = [i for i in known if stable[i] == 0]
+        if unstable:
+            take(max(unstable, key=lambda i: max_abs[i]), "most unstable")
+        stable_points = [i for i in known if stable[i] == 1]
+        if stable_points:
+            take(max(stable_points, key=lambda i: self.dte_p2p_um[i]), "stable, largest DTE")
+        crossings = [(sides(rec), rad_s_to_rpm(rec["parameter"])) for rec in r.period_doublings if "parameter" in rec]
+        for (row, _), rpm in crossings:
+            take(row, f"unstable side of the period doubling at {rpm:.6g} rpm")
+        for i in r.branch.folds:
+            take(int(i), "fold")
+        for (_, row), rpm in crossings:
+            take(row, f"stable side of the period doubling at {rpm:.6g} rpm")
+        return [{"row": int(i), "speed_rpm": float(self.speed_rpm[i]), "max_abs_floquet": float(max_abs[i]),
+                 "reason": picks[i]} for i in sorted(picks, key=lambda i: self.speed_rpm[i])]
 
     def solution(self, i: int) -> PeriodicSolution:
         """Point `i` of the ``nu`` branch as a :class:`~hbgear.gear.solve.PeriodicSolution`."""

@@ -9,12 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["frc_figure", "system_curve_figure", "timeseries_figure", "validation_figure", "stability_map_figure",
-           "static_te_figure", "harris_figure", "CONTOUR_MARGIN"]
+__all__ = ["frc_figure", "orders_figure", "dynamic_factor_figure", "floquet_figure", "system_curve_figure",
+           "timeseries_figure", "validation_figure", "stability_map_figure", "static_te_figure", "harris_figure",
+           "CONTOUR_MARGIN", "ORDER_MAP_RANGE_DB"]
 
 #: The unit contour of a stability map is drawn at 1 + this, so a neutral mode (the soft output
 #: spring's, whose modulus is 1 to within rounding) does not draw noise all over the map.
 CONTOUR_MARGIN = 1e-6
+
+#: The colour scale of the order map spans this many dB below its largest amplitude.
+ORDER_MAP_RANGE_DB = 60.0
 
 
 def _figure(**kwargs):
@@ -81,6 +85,208 @@ def frc_figure(curve, title: str | None = None):
     axes[1].set_xlabel("pinion speed [rpm]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
+    return fig
+
+
+def _plain_log_ticks(axis) -> None:
+    """Decade labels as plain numbers (``0.01``, ``100``) and unlabelled minor ticks at 2 and 5
+    on a log axis: no mathtext to typeset, which is most of a log axis's drawing time."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    axis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    axis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _branch_rows(curve):
+    """``(rows, nu)`` slices of the table: the ``nu`` branch, then each ``nu = 2`` branch."""
+    first, parts = curve.points, [(slice(0, curve.points), int(curve.response.hb.nu))]
+    for d in curve.response.doubled:
+        parts.append((slice(first, first + len(d.p)), 2))
+        first += len(d.p)
+    return parts
+
+
+def _order_map(speed, values_db, parts, bins: int):
+    """``(edges, grid)``: `values_db` ``(rows, orders)`` on a uniform speed grid of `bins` cells.
+    Per branch (`parts`, row slices) a cell takes the largest value of the branch's points in it
+    (a fold's two sides meet in one cell) or, between the branch's points, the value interpolated
+    over them sorted by speed; the grid is the largest over the branches (-inf where none is)."""
+    edges = np.linspace(speed.min(), speed.max(), bins + 1)
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    grid = np.full((bins, values_db.shape[1]), -np.inf)
+    for rows in parts:
+        v, s = values_db[rows], speed[rows]
+        if not len(s):
+            continue
+        own = np.full_like(grid, -np.inf)
+        np.maximum.at(own, np.clip(np.searchsorted(edges, s, side="right") - 1, 0, bins - 1), v)
+        gap = ~np.isfinite(own[:, 0]) & (centres >= s.min()) & (centres <= s.max())
+        order = np.argsort(s, kind="stable")
+        for k in range(v.shape[1]):
+            own[gap, k] = np.interp(centres[gap], s[order], v[order, k])
+        grid = np.maximum(grid, own)
+    return edges, grid
+
+
+def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | None = None):
+    """Order tracking of a gear frequency-response curve: the DTE amplitude at each mesh order
+    against speed (log scale; integer orders solid, half orders of ``nu = 2`` rows dashed), and the
+    colour map speed x order in dB re 1 um (per speed cell the largest amplitude of the solutions
+    there: both sides of a fold, a ``nu = 2`` branch beside the ``nu = 1`` one), the way order
+    tracking shows measured gearbox data. With `resonance` (ISO 6336-1 numbers) the
+    map carries the curve ``order = n_E1 / n`` where an order's frequency is the mesh mode's.
+
+    **Arguments:** `curve` (:class:`hbgear.api.FrequencyResponse`), `orders` (mesh orders),
+    `amplitudes_um` ``(rows, orders)`` (:meth:`~hbgear.gear.response.GearFrequencyResponse.order_amplitudes_um`).
+    """
+    from matplotlib import colormaps
+    from matplotlib.lines import Line2D
+
+    orders, amp = np.asarray(orders, dtype=float), np.asarray(amplitudes_um, dtype=float)
+    speed, n = curve.speed_rpm, curve.points
+    whole = orders == np.round(orders)
+    fig = _figure(figsize=(9, 7.5))
+    lines_ax, map_ax = fig.subplots(2, 1, sharex=True)
+    fig.subplots_adjust(left=0.09, right=0.8, bottom=0.07, top=0.88, hspace=0.08)
+    colours = colormaps["viridis"](np.linspace(0.0, 0.9, int(np.ceil(orders.max()))))
+    for rows, nu in _branch_rows(curve):
+        for k, order in enumerate(orders):
+            if (not whole[k] and nu == 1) or (nu == 2 and rows.start >= n and whole[k]):
+                continue  # no half orders on nu = 1 rows; of a nu = 2 branch only its half orders
+            values = np.where(amp[rows, k] > 0, amp[rows, k], np.nan)
+            lines_ax.semilogy(speed[rows], values, color=colours[int(np.ceil(order)) - 1], lw=1.0 if whole[k] else 0.8,
+                              ls="-" if whole[k] else "--")
+    handles = [Line2D([], [], color=colours[int(o) - 1], lw=1.2, label=f"order {o:g}") for o in orders[whole]]
+    if not np.all(whole):
+        handles.append(Line2D([], [], color="0.3", ls="--", lw=0.8, label="half orders (nu = 2)"))
+    lines_ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    lines_ax.set_ylabel("DTE amplitude [um]")
+    _plain_log_ticks(lines_ax.yaxis)
+    lines_ax.grid(alpha=0.3)
+
+    shown = np.argsort(orders, kind="stable")
+    with np.errstate(divide="ignore"):
+        db = 20.0 * np.log10(amp[:, shown])  # re 1 um
+    top = float(np.max(db[np.isfinite(db)])) if np.any(np.isfinite(db)) else 0.0
+    floor = top - ORDER_MAP_RANGE_DB
+    parts = [rows for rows, _ in _branch_rows(curve)]
+    edges, grid = _order_map(speed, np.maximum(db, floor), parts, min(600, max(len(speed), 2)))
+    values = orders[shown]
+    steps = np.diff(values).min() if len(values) > 1 else 1.0
+    order_edges = np.concatenate([values - 0.5 * steps, [values[-1] + 0.5 * steps]])
+    mesh = map_ax.pcolormesh(edges, order_edges, np.maximum(grid, floor).T, cmap="magma", vmin=floor, vmax=top,
+                             shading="flat", rasterized=True)
+    box = map_ax.get_position()
+    fig.colorbar(mesh, cax=fig.add_axes((box.x1 + 0.015, box.y0, 0.02, box.height)),
+                 label="DTE amplitude [dB re 1 um]")
+    n_grid = np.linspace(edges[0], edges[-1], 400)
+    if resonance is not None and np.any((resonance.n_E1_rpm / n_grid >= order_edges[0])
+                                        & (resonance.n_E1_rpm / n_grid <= order_edges[-1])):
+        map_ax.plot(n_grid, resonance.n_E1_rpm / n_grid, color="w", ls="--", lw=1.0,
+                    label=f"order x mesh frequency = mesh mode (n_E1 / n, n_E1 = {resonance.n_E1_rpm:.0f} rpm)")
+        map_ax.legend(fontsize=7, loc="upper right", framealpha=0.6)
+    map_ax.set_ylim(order_edges[0], order_edges[-1])
+    map_ax.set_ylabel("mesh order")
+    map_ax.set_xlabel("pinion speed [rpm]")
+    _mesh_frequency_axis(lines_ax, float(curve.model.teeth_pinion))
+    model = curve.model
+    fig.suptitle(title or f"DTE order tracking: {model.coupling} {model.formulation}, {model.boundary}, "
+                 f"H={curve.harmonics}, {len(speed)} rows", fontsize=10)
+    return fig
+
+
+def _resonance_ranges(ax, resonance) -> None:
+    """ISO 6336-1 ranges of the resonance ratio on `ax` (pinion speed axis): ``n_E1`` and the main
+    resonance range shaded, the intermediate range lighter, the ranges named at the top; legend
+    entries only for what lies in the axis' speed range."""
+    lo, hi = ax.get_xlim()
+    n_e1 = resonance.n_E1_rpm
+    seen = lambda a, b: min(b, hi) > max(a, lo)  # noqa: E731
+    main, intermediate = resonance.main_resonance_rpm, resonance.intermediate_rpm
+    ax.axvspan(*main, color="tab:orange", alpha=0.22, lw=0,
+               label=f"main resonance range {resonance.N_S:g} < N <= 1.15" if seen(*main) else None)
+    ax.axvspan(*intermediate, color="tab:orange", alpha=0.08, lw=0,
+               label="intermediate 1.15 < N < 1.5" if seen(*intermediate) else None)
+    ax.axvline(n_e1, color="tab:orange", lw=1.2,
+               label=f"n_E1 = {n_e1:.0f} rpm (ISO 6336-1)" if lo <= n_e1 <= hi else None)
+    names = (("subcritical ", resonance.subcritical_rpm, "right"), ("main", main, "center"),
+             ("interm.", intermediate, "center"), (" supercritical", resonance.supercritical_rpm, "left"))
+    for name, (a, b), align in names:
+        a, b = max(a, lo), min(b, hi)
+        if b > a:
+            x = {"right": b, "center": 0.5 * (a + b), "left": a}[align]
+            ax.text(x, 0.98, name, transform=ax.get_xaxis_transform(), ha=align, va="top", fontsize=7, color="0.35")
+    ax.set_xlim(lo, hi)
+
+
+def dynamic_factor_figure(curve, resonance, title: str | None = None):
+    """The dynamic factor ``max F_mesh / N`` (``N = T_p / R_bp``) of a gear curve against speed, with the ISO 6336-1
+    resonance speed ``n_E1``, its main resonance range and the other ranges marked, and the
+    resonance ratio ``N = n / n_E1`` on the top axis; unstable points red, ``nu = 2`` branches green."""
+    n, speed, factor, stable = curve.points, curve.speed_rpm, curve.dynamic_factor, curve.stable
+    fig = _figure(figsize=(8, 4.5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.11, top=0.83)
+    for k, (rows, nu) in enumerate(_branch_rows(curve)):
+        main = rows.start < n
+        ax.plot(speed[rows], factor[rows], color="k" if main else "tab:green", lw=1.0,
+                label="HB continuation" if main else ("period-doubled branch (nu = 2)" if k == 1 else None))
+    bad = stable[:n] == 0
+    if np.any(bad):
+        ax.plot(speed[:n][bad], factor[:n][bad], "o", ms=3, color="tab:red", label="unstable")
+    ax.axhline(1.0, color="0.5", lw=0.8)
+    ax.set_xlim(float(speed.min()), float(speed.max()))
+    _resonance_ranges(ax, resonance)
+    peak = int(np.argmax(factor[:n]))
+    top = ax.secondary_xaxis("top", functions=(lambda rpm: rpm / resonance.n_E1_rpm,
+                                               lambda ratio: ratio * resonance.n_E1_rpm))
+    top.set_xlabel("resonance ratio N = n / n_E1", fontsize=8)
+    top.tick_params(labelsize=8)
+    ax.set_xlabel("pinion speed [rpm]")
+    ax.set_ylabel("dynamic factor max F_mesh / (T_p / R_bp) [-]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(title or f"dynamic factor: peak {factor[peak]:.3g} at {speed[peak]:.0f} rpm "
+                 f"(N = {speed[peak] / resonance.n_E1_rpm:.3f})", fontsize=10)
+    return fig
+
+
+def floquet_figure(curve, points, title: str | None = None):
+    """Floquet multipliers of selected points of a gear curve: in the complex plane with the unit
+    circle, and their modulus against their angle (where a multiplier leaves the circle: through
+    +1, -1 or as a complex pair), one colour per point, the legend with each point's speed.
+
+    **Arguments:** `curve`; `points`: dicts ``row``, ``speed_rpm``, ``reason``
+    (:meth:`~hbgear.gear.response.GearFrequencyResponse.floquet_points`).
+    """
+    fig = _figure(figsize=(10, 5.8))
+    plane, polar = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.25]})
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.24, top=0.9, wspace=0.25)
+    angle = np.linspace(0.0, 2.0 * np.pi, 361)
+    plane.plot(np.cos(angle), np.sin(angle), color="0.4", lw=0.8)
+    polar.axhline(1.0, color="0.4", lw=0.8)
+    markers = "osD^vP"
+    for k, point in enumerate(points):
+        m = np.asarray(curve.response.multipliers[point["row"]], dtype=complex)
+        style = dict(marker=markers[k % len(markers)], ls="none", ms=6, mfc="none", mew=1.3, color=f"C{k}")
+        plane.plot(m.real, m.imag, **style)
+        polar.plot(np.degrees(np.angle(m)), np.abs(m), **style,
+                   label=f"{point['speed_rpm']:.0f} rpm, max |mu| = {point['max_abs_floquet']:.4f}: {point['reason']}")
+    plane.set_aspect("equal")
+    plane.set_xlabel("Re mu")
+    plane.set_ylabel("Im mu")
+    plane.grid(alpha=0.3)
+    plane.set_title("multipliers and the unit circle", fontsize=9)
+    polar.set_xlim(-185.0, 185.0)
+    polar.set_xticks([-180, -90, 0, 90, 180])
+    polar.set_xlabel("arg mu [deg] (+-180: through -1, 0: through +1)")
+    polar.set_ylabel("|mu|")
+    polar.grid(alpha=0.3)
+    fig.legend(*polar.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=2, frameon=False)
+    fig.suptitle(title or f"Floquet multipliers over the base period at {len(points)} points "
+                 f"({curve.response.stability.method if curve.response.stability is not None else 'no stability'})",
+                 fontsize=10)
     return fig
 
 
