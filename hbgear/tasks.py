@@ -37,7 +37,7 @@ from typing import Any
 from .errors import ConfigError
 from .outputs.io import write_text_atomic
 
-__all__ = ["CompileClock", "Journal", "JsonLines", "available_workers", "fingerprint", "run_tasks"]
+__all__ = ["CompileClock", "Journal", "JsonLines", "available_workers", "fingerprint", "plan", "run_tasks"]
 
 
 def fingerprint(kind: str, data: Any) -> str:
@@ -281,11 +281,21 @@ def _dask(fn, todo, address: str, key: str):
         client.close()
 
 
-def _results(fn, todo: dict, workers: int, scheduler: str | None, scheduler_key: str) -> Iterator:
-    if scheduler is not None and todo:
+def plan(workers: int | None, tasks: int, scheduler: str | None = None) -> tuple[str, int]:
+    """How :func:`run_tasks` runs `tasks` tasks: ``("dask", 0)``, ``("processes", n)`` or
+    ``("in-process", 1)`` (`workers` ``None``: one per CPU; never more processes than tasks)."""
+    if scheduler is not None:
+        return "dask", 0
+    n = min(available_workers() if workers is None else int(workers), tasks)
+    return ("processes", n) if n > 1 else ("in-process", 1)
+
+
+def _results(fn, todo: dict, workers: int | None, scheduler: str | None, scheduler_key: str) -> Iterator:
+    mode, n = plan(workers, len(todo), scheduler)
+    if mode == "dask" and todo:
         return _dask(fn, todo, scheduler, scheduler_key)
-    if workers > 1 and len(todo) > 1:
-        return _processes(fn, todo, workers)
+    if mode == "processes":
+        return _processes(fn, todo, n)
     return _serial(fn, todo)
 
 
@@ -310,7 +320,6 @@ def run_tasks(fn: Callable, tasks: Mapping[Hashable, tuple], *, journal: Journal
 
     done = {k: v for k, v in (done or {}).items() if k in tasks}
     todo = {k: tasks[k] for k in tasks if k not in done}
-    workers = min(available_workers() if workers is None else int(workers), max(len(todo), 1))
     if journal is not None:
         journal.start(done)
     bar = tqdm(total=len(tasks), initial=len(done), desc=desc, unit=unit, disable=not progress or None)

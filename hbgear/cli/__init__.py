@@ -1,7 +1,7 @@
 """Command-line framework: `hbgear <command> CONFIG [--set section.key=value ...] [--out DIR]`.
 
 Commands live in a registry (:data:`COMMANDS`) filled through :func:`register`; the built-in
-ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules of this package
+ones (`frc`, `solve`, `simulate`, `stability-map`, `study`, `validate`) are the modules of this package
 (see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
@@ -91,7 +91,7 @@ def register(command: Command, *, replace: bool = False) -> Command:
 
 
 #: The shipped commands: one module each in this package, registering itself on import.
-BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "validate")
+BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "study", "validate")
 
 
 def _load_builtin_commands() -> None:
