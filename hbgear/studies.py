@@ -299,16 +299,16 @@ class StudyResult:
         return {k: np.array(v, dtype=float) for k, v in record["curve"].items()}
 
     def plot(self, metric: str = "peak_dte_p2p_um"):
-        """Matplotlib figure (``study.png``): grid -- `metric` and the largest dynamic factor
-        against the first varied key, one line per value of the others; Monte Carlo -- `metric`
+        """Matplotlib figure (``study.png``): grid -- `metric`, the largest dynamic factor and the
+        unstable zones against the first varied key, one line per value of the others; Monte Carlo -- `metric`
         against each varied key and its histogram. Failed samples are left out (counted in the title)."""
         from .outputs.plots import study_figure
 
         values = {k: self[k] for k in self.keys}
-        metrics = {m: self[m] for m in (metric, "max_dynamic_factor")}
+        metrics = {m: self[m] for m in dict.fromkeys((metric, "max_dynamic_factor", "unstable_zones"))}
         failed = int((~self.success).sum())
         title = (f"{self.kind.replace('_', ' ')} study: {len(self)} samples" + (f", {failed} failed" if failed else "")
-                 + f" ({self.info.get('config_file') or 'config'})")
+                 + (f" ({Path(self.info['config_file']).name})" if self.info.get("config_file") else ""))
         return study_figure(self.kind, values, metrics, self.success, title)
 
 

@@ -185,7 +185,7 @@ def study_figure(kind: str, values: dict, metrics: dict, success, title: str = "
     success = np.asarray(success, dtype=bool)
     keys, names = list(values), list(metrics)
     if kind == "grid":
-        fig = _figure(figsize=(5.2 * len(names), 4.0), layout="constrained")
+        fig = _figure(figsize=(4.4 * len(names), 3.6), layout="constrained")
         axes = np.atleast_1d(fig.subplots(1, len(names)))
         x, labels = _positions(values[keys[0]])
         others = [tuple(str(values[k][i]) for k in keys[1:]) for i in range(len(x))]
@@ -200,12 +200,12 @@ def study_figure(kind: str, values: dict, metrics: dict, success, title: str = "
             ax.set_ylabel(name)
             if labels is not None:
                 ax.set_xticks(range(len(labels)), labels, fontsize=7)
-            if len(keys) > 1:
+            if len(keys) > 1 and ax is axes[0]:
                 ax.legend(fontsize=7)
             ax.grid(alpha=0.3)
     else:
         shown = keys[:3]
-        fig = _figure(figsize=(3.6 * (len(shown) + 1), 3.6), layout="constrained")
+        fig = _figure(figsize=(3.4 * (len(shown) + 1), 3.2), layout="constrained")
         axes = np.atleast_1d(fig.subplots(1, len(shown) + 1))
         y = np.asarray(metrics[names[0]], dtype=float)
         for ax, key in zip(axes, shown):
