@@ -78,12 +78,19 @@ def draw_samples(definition: StudyConfig) -> list[dict[str, Any]]:
     return [dict(zip(keys, values)) for values in zip(*columns)]
 
 
-def _check_entries(base: Mapping, definition: StudyConfig) -> None:
-    """Every ``key[i]`` names an entry of a list of the base config."""
+def _check_targets(base: Mapping, definition: StudyConfig) -> None:
+    """Every ``key[i]`` names an entry of a list of the base config, and a list-valued key
+    without an index is given whole lists (a number for it would fail in every sample)."""
     for p in definition.parameters:
-        if p.index is None:
-            continue
         current = base.get(p.section, {}).get(p.name)
+        if p.index is None:
+            values = p.values if p.distribution is None else p.arguments if p.distribution == "choice" else (0.0,)
+            if isinstance(current, list) and not all(isinstance(v, list) for v in values):
+                raise ConfigError(f'study.parameters."{p.key}"', list(values) if p.distribution is None else
+                                  {p.distribution: list(p.arguments)},
+                                  f"whole lists for the list {p.key}, or one entry of it: "
+                                  f'"{p.key}[0]" = ... (entry 0, mesh order 1 for the STE)')
+            continue
         if not isinstance(current, list) or p.index >= len(current):
             n = len(current) if isinstance(current, list) else 0
             raise ConfigError(f'study.parameters."{p.key}"', current,
@@ -327,14 +334,13 @@ def _base_document(config, overrides) -> tuple[dict, str | None]:
     return apply_overrides(base, list(overrides)), source
 
 
-def _fingerprint(config: RunConfig, samples: list, options: Mapping) -> str:
+def _fingerprint(config: RunConfig, samples: list) -> str:
     from .outputs.io import to_jsonable
     from .tasks import fingerprint
 
     data = to_jsonable(config.to_dict())
     data["study"].pop("scheduler", None)
     data["samples"] = [{k: toml_value(v) for k, v in s.items()} for s in samples]
-    data["options"] = dict(options)
     return fingerprint("study", data)
 
 
@@ -386,7 +392,7 @@ def study(config, *, out: str | os.PathLike | None = None, overrides=(), resume:
     `workers`: local processes (``None``: one per CPU; 1: this process); `scheduler`: a Dask
     scheduler address (default ``study.scheduler``); `progress`: a bar (``None``: on a terminal);
     `curves`: keep every sample's ``frc.csv`` columns (:meth:`StudyResult.curve`; with `out`,
-    written as ``curves/sample-NNNN/frc.csv``).
+    written as ``curves/sample-NNNN/frc.csv``; resumed samples recorded without one are computed again).
 
     **Returns:** a :class:`StudyResult`. **Raises:** :class:`~hbgear.errors.ConfigError` for a bad
     base config or ``[study]`` and for the record rule above; an interrupted run keeps its record.
@@ -403,18 +409,20 @@ def study(config, *, out: str | os.PathLike | None = None, overrides=(), resume:
     definition = parsed.study
     if not definition.parameters:
         raise ConfigError("study", "<missing>", 'a [study] section with [study.parameters] "section.key" = values')
-    _check_entries(base, definition)
+    _check_targets(base, definition)
     samples = draw_samples(definition)
     options = {"curves": bool(curves)}
     plain_base = sample_data(base, [])
     tasks = {i: (plain_base, _assignments(definition, s), options) for i, s in enumerate(samples)}
-    fingerprint = _fingerprint(parsed, samples, options)
+    fingerprint = _fingerprint(parsed, samples)
     journal, done = None, {}
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         journal = Journal(out / RECORD, fingerprint)
         done = _open_record(journal, resume, fresh)
+        if curves:
+            done = {k: r for k, r in done.items() if "curve" in r}
     address = scheduler if scheduler is not None else definition.scheduler
     mode, used = plan(workers, len(tasks) - len(done), address)
     results = run_tasks(run_sample, tasks, journal=journal, done=done, workers=workers, scheduler=address,

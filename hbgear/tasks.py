@@ -262,7 +262,10 @@ def _connect(address: str, key: str):
         from dask.distributed import Client
     except ImportError:
         raise ConfigError(key, address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
-    return Client(address)
+    try:
+        return Client(address)
+    except OSError as error:  # refused, unreachable, timed out
+        raise ConfigError(key, address, f"a reachable Dask scheduler ({type(error).__name__}: {error})") from None
 
 
 def _dask(fn, todo, address: str, key: str):

@@ -138,9 +138,13 @@ def test_a_list_entry_sample_and_its_set_arguments_give_the_same_config():
     assert data["mesh"]["ste_amplitude_um"] == [1.0, 0.5]  # the base is not changed
 
 
-def test_an_entry_beyond_the_base_list_is_bad_input(tmp_path):
+def test_an_entry_beyond_the_base_list_or_a_number_for_a_list_is_bad_input(tmp_path):
     path = study_file(tmp_path, '[study]\n[study.parameters]\n"mesh.ste_amplitude_um[0]" = [1.0]\n')
     with pytest.raises(ConfigError, match=r"ste_amplitude_um = \[1.0\]"):
+        hbgear.study(path, workers=1, progress=False)
+    path = study_file(tmp_path, '[study]\nkind = "monte_carlo"\nsamples = 2\n[study.parameters]\n'
+                      '"mesh.ste_amplitude_um" = { normal = [1.0, 0.2] }\n')
+    with pytest.raises(ConfigError, match=r'"mesh.ste_amplitude_um\[0\]"'):
         hbgear.study(path, workers=1, progress=False)
 
 
