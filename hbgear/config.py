@@ -287,8 +287,8 @@ class StudyConfig:
 
     **Fields:** `kind` ("grid": every combination of the `values`, the last key fastest;
     "monte_carlo": `samples` independent draws, reproducible from `seed`); `parameters` (tuple of
-    :class:`StudyParameter`, in the order of the table; empty: the config defines no study); `samples`, `seed` (monte_carlo only);
-    `scheduler` (Dask scheduler address, or `None` for local processes).
+    :class:`StudyParameter`, in the order of the table; empty: the config defines no study);
+    `samples`, `seed` (monte_carlo only); `scheduler` (Dask scheduler address, or `None` for local processes).
     """
 
     kind: str = "grid"

@@ -41,7 +41,8 @@ import numpy as np
 from .config import RunConfig, StudyConfig, apply_overrides, parse_config, read_toml
 from .errors import ConfigError, ConvergenceError
 
-__all__ = ["METRICS", "RECORD", "StudyResult", "draw_samples", "load_study", "run_sample", "study"]
+__all__ = ["METRICS", "RECORD", "RESULT_COLUMNS", "StudyResult", "draw_samples", "load_study", "run_sample",
+           "study"]
 
 #: The curve's numbers in ``study.csv``, after ``sample`` and the varied keys: the peak of the
 #: DTE peak-to-peak on the ``nu`` branch and its speed, the largest dynamic factor there, the
@@ -49,8 +50,10 @@ __all__ = ["METRICS", "RECORD", "StudyResult", "draw_samples", "load_study", "ru
 #: consecutive unstable curve points), unstable points, folds, located period doublings, points.
 METRICS = ("peak_dte_p2p_um", "peak_speed_rpm", "max_dynamic_factor", "unstable_zones", "unstable_points", "folds",
            "period_doublings", "points")
-#: The last columns of ``study.csv``.
+#: The status columns of ``study.csv``.
 STATUS_COLUMNS = ("success", "status", "message")
+#: The columns of ``study.csv`` after ``sample`` and the varied keys: INTERFACE.md's first, then the rest.
+RESULT_COLUMNS = (*METRICS[:4], "success", *METRICS[4:], "status", "message")
 #: The resumable record in the output directory (removed when the study is complete).
 RECORD = "study.partial.jsonl"
 OUTPUTS = ("study.csv", "study.json", "study.png")
@@ -125,7 +128,9 @@ def toml_value(value: Any) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        if math.isfinite(value):
+            return repr(value)
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, (list, tuple)):
@@ -264,13 +269,15 @@ class StudyResult:
     @property
     def columns(self) -> tuple[str, ...]:
         """The columns of ``study.csv``."""
-        return ("sample", *self.keys, *METRICS, *STATUS_COLUMNS)
+        return ("sample", *self.keys, *RESULT_COLUMNS)
 
     def rows(self) -> list[dict]:
         """The ``study.csv`` rows (``success`` 1/0)."""
-        return [{"sample": i, **{k: _cell(s[k]) for k in self.keys}, **{k: r[k] for k in METRICS},
-                 "success": int(bool(r["success"])), "status": r["status"], "message": r["message"]}
-                for i, (s, r) in enumerate(zip(self.samples, self.records))]
+        rows = []
+        for i, (s, r) in enumerate(zip(self.samples, self.records)):
+            row = {"sample": i, **{k: _cell(s[k]) for k in self.keys}, **{k: r[k] for k in RESULT_COLUMNS}}
+            rows.append(row | {"success": int(bool(r["success"]))})
+        return rows
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "sample":
@@ -330,7 +337,8 @@ def _base_document(config, overrides) -> tuple[dict, str | None]:
     elif isinstance(config, (str, os.PathLike)):
         base, source = read_toml(config), os.fspath(config)
     else:
-        raise TypeError(f"study() takes a config file path, a TOML-shaped dict or a RunConfig, not {type(config).__name__}")
+        raise TypeError("study() takes a config file path, a TOML-shaped dict or a RunConfig, "
+                        f"not {type(config).__name__}")
     return apply_overrides(base, list(overrides)), source
 
 

@@ -134,7 +134,8 @@ class Journal:
 
 # ----------------------------------------------------------------------------- compile time
 
-_COMPILE_EVENTS = frozenset({"/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
+_COMPILE_EVENTS = frozenset({"/jax/core/compile/jaxpr_trace_duration",
+                             "/jax/core/compile/jaxpr_to_mlir_module_duration",
                              "/jax/core/compile/backend_compile_duration"})
 _SPANS: list[tuple[float, float]] = []
 _CLOCKS = [0]  # clocks running in this process
@@ -261,7 +262,8 @@ def _connect(address: str, key: str):
     try:
         from dask.distributed import Client
     except ImportError:
-        raise ConfigError(key, address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
+        raise ConfigError(key, address,
+                          "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
     try:
         return Client(address)
     except OSError as error:  # refused, unreachable, timed out

@@ -19,7 +19,7 @@ import hbgear
 from hbgear import cli
 from hbgear.config import parse_config, read_toml
 from hbgear.errors import ConfigError
-from hbgear.studies import METRICS, RECORD, draw_samples, sample_data, set_arguments
+from hbgear.studies import RECORD, draw_samples, sample_data, set_arguments
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "paper_table1.toml"
@@ -183,8 +183,9 @@ def test_each_row_is_the_frc_run_with_the_same_set_values(tmp_path, capsys):
     assert {p.name for p in out.iterdir()} == {"study.csv", "study.json", "study.png"}
     with (out / "study.csv").open() as fh:
         rows = list(csv.DictReader(fh))
-    assert list(rows[0]) == ["sample", "mesh.ste_amplitude_um[0]", "mesh.damping_ratio", *METRICS,
-                             "success", "status", "message"]
+    assert list(rows[0]) == ["sample", "mesh.ste_amplitude_um[0]", "mesh.damping_ratio", "peak_dte_p2p_um",
+                             "peak_speed_rpm", "max_dynamic_factor", "unstable_zones", "success", "unstable_points",
+                             "folds", "period_doublings", "points", "status", "message"]
     assert [r["success"] for r in rows] == ["1", "1", "0", "1"]
     assert rows[2]["status"] == "invalid" and rows[2]["message"].startswith("mesh.damping_ratio = -0.006")
     assert rows[2]["peak_dte_p2p_um"] == "nan"
@@ -376,3 +377,23 @@ def test_cli_bad_inputs_exit_2(tmp_path, capsys, monkeypatch):
     assert cli.main(["study", str(config), "--scheduler", "tcp://127.0.0.1:1", "--out", str(tmp_path / "o")]) == 2
     assert "install hbgear[distributed]" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_frc_curve_is_the_frc_path_and_its_dataframe(monkeypatch):
+    from hbgear.api import frc_curve
+    from hbgear.gear.response import COLUMNS
+
+    curve = frc_curve(hbgear.load_config(EXAMPLE, FAST), progress=False)
+    assert curve.success and curve.speed_rpm[0] == 12000.0 and curve.speed_rpm[curve.points - 1] == 14000.0
+    assert curve.harmonics == 8 and curve.response.hb.samples == 64
+    try:
+        import pandas  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        frame = curve.to_dataframe()
+        assert list(frame.columns) == list(COLUMNS) and len(frame) == len(curve)
+        np.testing.assert_array_equal(frame["dte_p2p_um"].to_numpy(), curve.dte_p2p_um)
+    monkeypatch.setitem(sys.modules, "pandas", None)
+    with pytest.raises(ImportError, match="pip install pandas"):
+        curve.to_dataframe()

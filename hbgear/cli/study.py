@@ -5,8 +5,10 @@ its curve is exactly the one ``hbgear frc`` computes with the same ``--set`` val
 sample in ``study.json``). Writes into the output directory:
 
 - ``study.csv``: one row per sample -- ``sample``, the varied keys (named as in
-  ``[study.parameters]``), :data:`hbgear.studies.METRICS`, ``success`` (1/0), ``status``,
-  ``message``; no timings, so a resumed study's file is byte-identical to an uninterrupted one;
+  ``[study.parameters]``), then :data:`hbgear.studies.RESULT_COLUMNS` (``peak_dte_p2p_um,
+  peak_speed_rpm, max_dynamic_factor, unstable_zones, success`` (1/0), ``unstable_points, folds,
+  period_doublings, points, status, message``); no timings, so a resumed study's file is
+  byte-identical to an uninterrupted one;
 - ``study.json``: the definition, every sample's record (zones, period doublings, folds, the
   ``--set`` arguments, seconds, compile seconds, worker), timings (samples per minute, the
   fraction of the time spent compiling), execution and provenance, the config;
@@ -62,7 +64,8 @@ def _validate(config, args) -> None:
         try:
             import dask.distributed  # noqa: F401
         except ImportError:
-            raise ConfigError(key, address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
+            raise ConfigError(key, address,
+                              "a Dask scheduler needs dask.distributed: install hbgear[distributed]") from None
 
 
 def _report(result, out_dir) -> int:
