@@ -306,7 +306,7 @@ def _results(fn, todo: dict, workers: int | None, scheduler: str | None, schedul
 
 def run_tasks(fn: Callable, tasks: Mapping[Hashable, tuple], *, journal: Journal | None = None,
               done: Mapping | None = None, workers: int | None = 1, scheduler: str | None = None,
-              progress: bool = True, desc: str | None = None, unit: str = "task",
+              progress: bool | None = True, desc: str | None = None, unit: str = "task",
               scheduler_key: str = "--scheduler", on_result: Callable | None = None) -> dict:
     """``fn(*tasks[key])`` for every key not in `done`, then every result by key in task order.
 
@@ -315,7 +315,7 @@ def run_tasks(fn: Callable, tasks: Mapping[Hashable, tuple], *, journal: Journal
     to as results arrive; `done` ``{key: result}`` finished already (keys not in `tasks` are
     dropped); `workers`: local processes (``None``: one per available CPU; at most one per task to
     run; 1: in this process); `scheduler`: a Dask scheduler address (then `workers` is ignored);
-    `progress`: a tqdm bar (on a terminal only); `desc`, `unit`: its labels; `scheduler_key`: the
+    `progress`: a tqdm bar on a terminal (``False``: none); `desc`, `unit`: its labels; `scheduler_key`: the
     option named when Dask is missing; `on_result(key, result)`: called as each result arrives.
 
     **Returns:** ``{key: result}`` for every task. **Raises:** what a task raised (the record keeps
@@ -327,7 +327,7 @@ def run_tasks(fn: Callable, tasks: Mapping[Hashable, tuple], *, journal: Journal
     todo = {k: tasks[k] for k in tasks if k not in done}
     if journal is not None:
         journal.start(done)
-    bar = tqdm(total=len(tasks), initial=len(done), desc=desc, unit=unit, disable=not progress or None)
+    bar = tqdm(total=len(tasks), initial=len(done), desc=desc, unit=unit, disable=True if progress is False else None)
     try:
         with contextlib.closing(_results(fn, todo, workers, scheduler, scheduler_key)) as results:
             for key, result in results:
