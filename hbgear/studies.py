@@ -493,7 +493,8 @@ def _number(text: str) -> Any:
 def load_study(path: str | os.PathLike) -> StudyResult:
     """A study written by :func:`study` / ``hbgear study``, from its directory or its
     ``study.json`` / ``study.csv`` (``study.json`` when present: all records; else the
-    ``study.csv`` rows). **Returns:** a :class:`StudyResult`."""
+    ``study.csv`` rows, without the definition: the kind is taken as "grid").
+    **Returns:** a :class:`StudyResult`."""
     import csv
 
     path = Path(path)

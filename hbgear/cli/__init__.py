@@ -1,7 +1,7 @@
 """Command-line framework: `hbgear <command> CONFIG [--set section.key=value ...] [--out DIR]`.
 
 Commands live in a registry (:data:`COMMANDS`) filled through :func:`register`; the built-in
-ones (`frc`, `solve`, `simulate`, `stability-map`, `study`, `validate`) are the modules of this package
+ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules of this package
 (see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
