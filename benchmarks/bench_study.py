@@ -10,8 +10,10 @@ in a fresh process (start-up, imports and compilation included), timed from outs
 warm-up study of 2 samples first fills the disk compilation cache (its time is reported on its
 own line); then, alternating, ``--workers 1`` (in the command's own process) and ``--workers P``
 (P = the CPUs: spawned worker processes), ``repeats`` times each; medians and their ratio.
-The compile share is ``study.json``'s ``compile_fraction``: the time inside JAX's compile events
-(tracing, lowering, XLA compilation or a disk-cache load) over the samples' own time.
+The CPU time of each command (with its worker processes) says what the workers cost beyond the
+samples themselves, whatever else the machine runs. The compile share is ``study.json``'s
+``compile_fraction``: the time inside JAX's compile events (tracing, lowering, XLA compilation or
+a disk-cache load) over the samples' own time.
 
 Run: ``python benchmarks/bench_study.py [--quick] [--repeats N]``.
 """
@@ -21,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -55,14 +58,17 @@ def one_run(config: Path, out: Path, workers: int) -> dict:
             "--no-progress", "--fresh"]
     for s in FAST:
         argv += ["--set", s]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     done = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True)
     wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the command and its worker processes
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     if done.returncode != 0:
         raise RuntimeError(f"hbgear study failed ({done.returncode}): {done.stderr.strip()}")
     summary = json.loads((out / "study.json").read_text())
     t_s = summary["timings_s"]
-    return {"wall": wall, "inside": t_s["wall"], "compile_fraction": t_s["compile_fraction"],
+    return {"wall": wall, "cpu": cpu, "inside": t_s["wall"], "compile_fraction": t_s["compile_fraction"],
             "compile_s": t_s["compile_seconds"], "sample_s": t_s["sample_seconds"], "samples": summary["samples"],
             "succeeded": summary["succeeded"], "mode": summary["execution"]["mode"],
             "workers": summary["execution"]["workers"]}
@@ -88,6 +94,7 @@ def run(quick=False, repeats=None):
     for w, rs in runs.items():
         wall = statistics.median(r["wall"] for r in rs)
         result[w] = {"wall_s": wall, "walls": [r["wall"] for r in rs], "per_minute": 60.0 * n / wall,
+                     "cpu_s": statistics.median(r["cpu"] for r in rs),
                      "compile_fraction": statistics.median(r["compile_fraction"] for r in rs),
                      "compile_s": statistics.median(r["compile_s"] for r in rs),
                      "sample_s": statistics.median(r["sample_s"] for r in rs), "mode": rs[0]["mode"],
@@ -107,8 +114,10 @@ def table(r) -> str:
         lines.append(f"--workers {w} ({x['mode']}, {x['workers']} worker(s)): {x['wall_s']:.1f} s "
                      f"({', '.join(f'{v:.1f}' for v in x['walls'])}), {x['per_minute']:.0f} samples/min, "
                      f"compiling {100 * x['compile_fraction']:.0f}% of the samples' time "
-                     f"({x['compile_s']:.1f} of {x['sample_s']:.1f} s), {x['succeeded']} of {r['samples']} succeeded")
-    lines.append(f"local processes / one process: {r['speedup']:.2f}x samples per minute on {cpus} CPUs")
+                     f"({x['compile_s']:.1f} of {x['sample_s']:.1f} s), CPU {x['cpu_s']:.1f} s (command and its "
+                     f"workers), {x['succeeded']} of {r['samples']} succeeded")
+    lines.append(f"local processes / one process: {r['speedup']:.2f}x samples per minute on {cpus} CPUs; "
+                 f"CPU time {r[cpus]['cpu_s'] / r[1]['cpu_s']:.2f}x")
     return "\n".join(lines)
 
 
