@@ -244,6 +244,7 @@ def _stop_pool(pool, futures) -> None:
 def _processes(fn, todo, workers: int):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init_worker, initargs=(os.getpid(),))
@@ -252,6 +253,11 @@ def _processes(fn, todo, workers: int):
         futures = {pool.submit(fn, *args): key for key, args in todo.items()}
         for future in as_completed(futures):
             yield futures[future], future.result()
+    except BrokenProcessPool as error:
+        _stop_pool(pool, futures)
+        raise RuntimeError("a local worker process died (killed, out of memory, or it could not start: a script "
+                           "that runs tasks in worker processes needs the `if __name__ == \"__main__\":` guard); "
+                           "the tasks finished before it are kept in the record") from error
     except BaseException:
         _stop_pool(pool, futures)
         raise
