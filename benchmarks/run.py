@@ -62,6 +62,7 @@ def _run(q):
     import bench_frc_vs_ti
     import bench_newton_breakdown
     import bench_stability_map
+    import bench_study
 
     t0 = time.perf_counter()
     print("#", machine(), flush=True)
@@ -80,6 +81,9 @@ def _run(q):
     print("\n## 4. where the time of a continuation step goes", flush=True)
     b, protos = bench_newton_breakdown.run(q)
     print(bench_newton_breakdown.table(b, protos), flush=True)
+    print("\n## 5. studies: local processes vs one process", flush=True)
+    study = bench_study.run(q)
+    print(bench_study.table(study), flush=True)
 
     t = b["timer"]
     pts = b["points"]
@@ -128,6 +132,15 @@ def _run(q):
          f"{100 * (t.total.get('eval (R,J,dR/dp)', 0) + t.total.get('eval R (line search)', 0)) / b['wall']:.0f} %", ""),
         ("4", "share in linear algebra",
          f"{100 * sum(v for k, v in t.total.items() if k.startswith('linalg.')) / b['wall']:.0f} %", ""),
+    ]
+    cpus = study["cpus"]
+    rows += [
+        ("5", f"study of {study['samples']} curves, one process", f"{study[1]['per_minute']:.0f} /min", ""),
+        ("5", f"study of {study['samples']} curves, {cpus} local processes", f"{study[cpus]['per_minute']:.0f} /min",
+         ""),
+        ("5", "local processes / one process (samples per minute)", f"{study['speedup']:.2f}x", ""),
+        ("5", "compile share of the samples' time, one process / processes",
+         f"{100 * study[1]['compile_fraction']:.0f} / {100 * study[cpus]['compile_fraction']:.0f} %", ""),
     ]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")
