@@ -265,8 +265,9 @@ class GearPairModel:
         _, _, wm = self.speeds(omega_pinion)
         if self.coupling == "LTI":
             # Eq. 10: k_mean (delta - d_st) + c (delta' - d_st'), d_st the loaded STE fluctuation;
-            # the impulsive part of c d_st' at stiffness jumps is applied by the caller
-            # (harmonic balance: exactly in the Fourier coefficients; time integration: as kicks).
+            # here the pointwise part c eps' of c d_st'; its impulses at the stiffness jumps are
+            # dG/dt of lti_step_forcing (harmonic balance: exact Fourier coefficients of the
+            # system's derivative_forcing; time integration: velocity kicks).
             eps, deps = self.static_transmission_error(s, wm, xp)
             dst = self.loaded_static_transmission_error(s, wm, xp)
             return self.k_mean_N_per_m * (q[0] - dst) + self.mesh_damping_Ns_per_m * (qd[0] - deps)
@@ -361,18 +362,27 @@ class GearPairModel:
             row2 = row2 + input_force - output - spring
         return xp.stack([row1, row2])
 
-    def lti_damping_impulse(self, s_jump, omega_pinion):
-        """Generalised impulse [N s] of ``c d_st'`` at a stiffness jump (LTI only).
+    def lti_step_forcing(self, s, xp=np):
+        """``G(s) = c N (1/k(s) - <1/k>)`` on the DTE row [N s] for LTI, else ``None``.
 
-        ``d_st = N/k(s)`` jumps where ``k`` does; ``c d_st'`` then carries ``c [d_st]`` as an
-        impulse on the DTE row, which time integration applies as a velocity kick.
+        The piecewise-constant part of ``c d_st`` (``d_st = eps + N/k(s) - <N/k>``): ``-F_mesh``
+        holds ``+c d_st'``, whose pointwise part ``c eps'`` is in :meth:`mesh_force` and whose
+        rest is ``dG/dt`` -- impulses ``c N [1/k]`` where ``k`` jumps. Shape ``(ndof,) + s.shape``.
         """
         if self.coupling != "LTI":
+            return None
+        g = self.contact_ratio
+        mean_compliance = (g - 1.0) / self.k_max_N_per_m + (2.0 - g) / self.k_min_N_per_m
+        step = self.mesh_damping_Ns_per_m * self.normal_load_N * (1.0 / self.mesh_stiffness(s, xp) - mean_compliance)
+        return xp.stack([step] + [0.0 * step] * (self.ndof - 1))
+
+    def lti_damping_impulse(self, s_jump, omega_pinion):
+        """Generalised impulse [N s] at phase `s_jump`: the jump ``[G]`` of :meth:`lti_step_forcing`
+        (zero unless LTI), which time integration applies as a velocity kick ``M dv = [G]``."""
+        if self.coupling != "LTI":
             return np.zeros(self.ndof)
-        before = self.loaded_static_transmission_error(np.asarray(s_jump - 1e-9) % 1.0, 0.0)
-        after = self.loaded_static_transmission_error(np.asarray(s_jump + 1e-9) % 1.0, 0.0)
-        impulse = self.mesh_damping_Ns_per_m * float(after - before)
-        return np.array([impulse] + [0.0] * (self.ndof - 1))
+        sides = self.lti_step_forcing(np.asarray([s_jump - 1e-9, s_jump + 1e-9]) % 1.0)
+        return np.asarray(sides[:, 1] - sides[:, 0], dtype=float)
 
     def phase_breakpoints(self) -> np.ndarray:
         """Mesh phases in [0, 1) where the equations switch (numpy; for time integration)."""

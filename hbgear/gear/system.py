@@ -110,6 +110,11 @@ class GearSystem(PeriodicSystem):
         model, _ = self._at(p)
         return model.breakpoint_candidates(xp)
 
+    def derivative_forcing(self, s, p, xp=np):
+        """LTI: the stiffness-jump impulses of ``c d_st'`` (:meth:`GearPairModel.lti_step_forcing`)."""
+        model, _ = self._at(p)
+        return model.lti_step_forcing(s, xp)
+
     def force(self, s, q, qd, p, part, extra, xp=np):
         model, omega = self._at(p)
         # the spring's static wind-up enters the constant terms only (not the "nonlinear" part),
