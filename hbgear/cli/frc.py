@@ -59,7 +59,7 @@ from ..engine.hb import HarmonicBalance
 from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from ..gear.solve import (PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, rpm_to_rad_s, solve_periodic,
                      start_guess)
-from ..gear.system import GearSystem
+from ..gear.system import GearSystem, linear_equivalent
 
 __all__ = ["FRC", "COLUMNS", "FLOQUET_COLUMNS", "floquet_rows", "run", "plot_frc",
            "PD_AUTO_MAX_UNKNOWNS", "period_doubling_enabled", "follow_period_doubling"]
@@ -125,36 +125,14 @@ def _harmonics(config, model, omega_start, omega_stop, nu):
 
 
 def _linear_equivalent(model):
-    """The linear model whose variational equations are `model`'s along a solution that never
-    enters the backlash dead zone (`model` itself if linear), or ``None``.
-
-    The backlash contact law ``g(x)`` is piecewise linear with slope 1 outside ``|x| <= b``, so
-    along a solution with ``|delta - eps| > b`` throughout, the linearisation is exactly that of
-    the same model with ``contact = "linear"`` -- and its exact monodromy applies.
-    """
-    if model.is_linear:
-        return model
-    if getattr(model, "contact", None) == "backlash":
-        linear = model.replace(contact="linear")
-        if linear.is_linear:
-            return linear
-    return None
+    """:func:`hbgear.gear.system.linear_equivalent` of `model` (the candidate, no solution)."""
+    return linear_equivalent(model)
 
 
 def _keeps_contact(model, hb, z, p) -> bool:
-    """True if the solution `z` (of `hb`, speed `p`) stays out of the backlash dead zone.
-
-    ``|delta - eps| > b`` on a dense grid (8 samples per harmonic, at least 1024 per base period),
-    with a margin of 1e-3 of the DTE peak-to-peak for the values between the samples.
-    """
-    if model.contact != "backlash":
-        return True
-    sol = PeriodicSolution.from_z(model, float(p), z, hb)
-    f = np.linspace(0.0, 1.0, max(1024, 8 * hb.harmonics * hb.nu), endpoint=False)
-    q, _ = sol.state_at(f)
-    eps, _ = model.static_transmission_error((f * hb.nu) % 1.0, model.speeds(float(p))[2], np)
-    x = np.asarray(q[0]) - np.asarray(eps)
-    return bool(np.min(np.abs(x)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(x)) + 1e-15)
+    """True if the solution `z` (of `hb`, speed `p`) has the linear equivalent
+    (:func:`hbgear.gear.system.linear_equivalent`: contact kept, compressive loads)."""
+    return linear_equivalent(model, PeriodicSolution.from_z(model, float(p), z, hb)) is not None
 
 
 #: Points per call of :func:`hbgear.engine.floquet.hill_multipliers_batch` (one vmapped Hill-matrix

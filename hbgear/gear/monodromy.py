@@ -175,8 +175,8 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
 
     **Arguments:**
 
-    - `model`: a :class:`~hbgear.gear.model.GearPairModel` with ``model.is_linear`` (LTI, or LTV
-      with teeth that never separate).
+    - `model`: a :class:`~hbgear.gear.model.GearPairModel` with ``model.is_linear`` (LTI, LTV-A
+      with teeth that never separate, or a linear equivalent with ``normal_loads = "signed"``).
     - `omegas`: pinion speeds ``Omega_p`` [rad/s], scalar or 1-D.
     - `substeps`: Magnus sub-steps per segment; default 1 for piecewise-constant models
       (exact), 16 otherwise (formulation B: relative error ~1e-10).
@@ -190,8 +190,9 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
     """
     if not model.is_linear:
         raise ValueError(
-            f"monodromy_linear needs a linear model (LTI/LTV without backlash), got coupling="
-            f"{model.coupling!r}, contact={model.contact!r}; use monodromy_variational or Hill"
+            f"monodromy_linear needs a linear model (LTI, LTV-A without backlash, or a linear equivalent of "
+            f"hbgear.gear.system.linear_equivalent), got coupling={model.coupling!r}, formulation="
+            f"{model.formulation!r}, contact={model.contact!r}; use monodromy_variational or Hill"
         )
     scalar = np.ndim(omegas) == 0
     omegas = np.atleast_1d(np.asarray(omegas, dtype=float))

@@ -300,7 +300,8 @@ def solve_periodic(
         if result is None or not result.converged:
             start_name = "given"
             if z0 is None:
-                linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
+                linear = (model.replace(coupling="LTV", contact="linear", normal_loads="signed")
+                          if model.coupling != "LTI" else model)
                 start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
                 z0 = np.array(start.z)
                 if model.contact == "backlash":  # the loaded teeth sit half the backlash further on
