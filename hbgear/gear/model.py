@@ -123,6 +123,12 @@ class GearPairModel:
             value = getattr(self, name)
             if isinstance(value, str) and value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        # LTI is linear with quasi-static friction loads (MODEL.md section 3)
+        if isinstance(self.coupling, str) and self.coupling == "LTI":
+            if isinstance(self.formulation, str) and self.formulation == "B":
+                raise ValueError("formulation 'B' (dynamic normal loads) needs coupling 'LTV' or 'NLTV', not 'LTI'")
+            if isinstance(self.contact, str) and self.contact == "backlash":
+                raise ValueError("contact 'backlash' needs coupling 'LTV' or 'NLTV', not 'LTI' (LTI is linear)")
 
     def replace(self, **changes) -> GearPairModel:
         return replace(self, **changes)
