@@ -6,10 +6,9 @@ are compared through physical accelerations (``phi_p''``, ``phi_g''``, or ``delt
 not depend on the coordinates either side uses; :func:`model_view` is the only code that knows
 the model's coordinates. Models are built through the public config API.
 
-The friction normal-load rule of MODEL.md §11 is the specification the derivation implements;
-today's model does not gate the normal load on contact (backlash) and lets a negative
-formulation-B mesh force through. Cases that differ only because of that are marked
-``xfail(strict=True)``, so they must start passing (and lose the mark) when the fix lands.
+The friction normal-load rule of MODEL.md §11 is the specification the derivation implements
+(no friction without a compressive load; the back flank by the mirror simplification): every case
+below, separation and back-flank contact included, must agree.
 """
 
 from __future__ import annotations
@@ -32,7 +31,6 @@ from hbgear.config import parse_config
 from hbgear.errors import ConfigError
 
 RTOL = 1e-12  # relative to the sum of the magnitudes of the terms (derivation.magnitude)
-SECTION_11 = "MODEL.md §11 friction gating not yet in the model"
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
 LAWS = ("none", "coulomb", "arctan", "kelley-lemanski")
 TRANSLATIONS = ("y_p", "x_p", "y_g", "x_g")
@@ -253,24 +251,6 @@ def compare(model, p, s, omega, state):
     return worst, mine
 
 
-def section_11_differs(combo: Combo, regime: str) -> bool:
-    """Does today's normal load differ from §11 in this regime (with friction acting)?
-
-    Formulation A with backlash still loads pairs in the dead zone and on the back flank; formulation
-    B passes ``sigma_j F_mesh`` on whatever its sign (and in the dead zone its damping part)."""
-    if combo.law == "none" or combo.coupling == "LTI" or regime == "drive":
-        return False
-    if combo.formulation == "A":
-        return combo.backlash and regime in ("deadzone", "back")
-    if combo.coupling == "NLTV" and combo.law == "kelley-lemanski" and combo.backlash and regime == "tension":
-        return False  # its mu vanishes at the negative load per width, and §11 gives N_j = 0 there too
-    return True
-
-
-def _xfail_if(condition):
-    return [pytest.mark.xfail(strict=True, reason=SECTION_11)] if condition else []
-
-
 # --------------------------------------------------------------------------------- the tests
 
 
@@ -292,7 +272,7 @@ def test_equations_of_motion_drive_flank(combo):
 
 
 LOSS_CASES = [
-    pytest.param(combo, regime, marks=_xfail_if(section_11_differs(combo, regime)), id=f"{combo.id}-{regime}")
+    pytest.param(combo, regime, id=f"{combo.id}-{regime}")
     for combo in COMBOS
     for regime in (REGIMES_BACKLASH if combo.backlash else REGIMES_LINEAR)[1:]
 ]
@@ -315,15 +295,8 @@ def test_equations_of_motion_large_vibration(combo, regime):
         agree(worst)
 
 
-def _power_xfail(coupling, formulation, law):
-    """B with a law that acts at negative load: today's normal load sigma_j F_mesh < 0 reverses
-    friction (NLTV Kelley-Lemanski is spared: its mu vanishes at a negative load per width)."""
-    return formulation == "B" and law != "none" and not (coupling == "NLTV" and law == "kelley-lemanski")
-
-
 POWER_CASES = [
     pytest.param(coupling, formulation, backlash, law,
-                 marks=_xfail_if(_power_xfail(coupling, formulation, law)),
                  id=f"{coupling}-{formulation}-{'backlash' if backlash else 'linear'}-{law}")
     for coupling in ("LTI", "LTV", "NLTV")
     for formulation in (("A",) if coupling == "LTI" else ("A", "B"))

@@ -93,7 +93,8 @@ def test_expm_batched_matches_scipy():
 
 
 def test_formulation_b_magnus_equals_variational_equations():
-    m = model("torques", formulation="B")
+    # the signed loads sigma_j F_mesh: LTV-B's linear equivalent along states with F_mesh > 0
+    m = model("torques", formulation="B").replace(normal_loads="signed")
     omega = 26000.0 / RPM
     magnus = monodromy.monodromy_linear(m, omega)
     variational = monodromy.monodromy_variational(m, lambda tau: (np.zeros((1, 1)), np.zeros((1, 1))), omega)
@@ -154,7 +155,8 @@ def test_formulation_b_shift_of_the_multipliers_pinned_by_an_independent_integra
     not only one that leaves A = B."""
     omega = rpm / RPM
     a_exact = monodromy.multipliers_linear(model("torques"), omega)
-    b_model = monodromy.multipliers_linear(model("torques", formulation="B"), omega)
+    # LTV-B along states with F_mesh > 0: its linear equivalent, the signed loads sigma_j F_mesh
+    b_model = monodromy.multipliers_linear(model("torques", formulation="B").replace(normal_loads="signed"), omega)
     a_hand = np.linalg.eigvals(_hand_written_monodromy(model("torques"), omega, 0.0))
     b_hand = np.linalg.eigvals(_hand_written_monodromy(model("torques", formulation="B"), omega, 1.0))
     assert max_pair_distance(a_exact, a_hand) < 1e-11

@@ -11,6 +11,8 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 - ``K_conv``, ``C_conv``, ``F``: Galerkin matrices / vector of the affine periodic part
   ``Q_lin = F(s) - K(s) q - C(s) q'``, from its exact Fourier coefficients (composite
   Gauss--Legendre between the breakpoints, :mod:`hbgear.engine.quadrature`): no sampling error.
+  ``F`` includes ``dG/dt`` of a system's ``derivative_forcing`` ``G`` (impulses at its jumps
+  included) as ``i m w G_m``.
 - ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
   with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
   of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._sample_points`):
@@ -284,7 +286,23 @@ class HarmonicBalance:
         forcing = coeff[0]
         stiffness = xp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
         damping = xp.transpose(forcing[None] - coeff[1 + n :], (1, 0, 2))
-        return forcing, stiffness, damping
+        return forcing + self._derivative_forcing(system, p, rule, xp), stiffness, damping
+
+    def _derivative_forcing(self, system, p, rule, xp=jnp):
+        """Base-harmonic coefficients ``i m w G_m`` of the system's ``dG/dt`` (its
+        ``derivative_forcing``, jumps included as impulses), shape ``(n, 2H+1)``; 0 without one.
+
+        ``G_m`` come from the quadrature between the breakpoints (exact for a piecewise smooth
+        ``G``), so the impulses ``[G] delta(t - t_c)`` enter with their exact coefficients.
+        """
+        s, kernel_cos, kernel_sin = rule[:3]
+        g = system.derivative_forcing(s, p, xp)
+        if g is None:
+            return 0.0
+        g = xp.asarray(g, dtype=float)
+        coeff = fourier.mesh_to_base(g @ kernel_cos.T - 1j * (g @ kernel_sin.T), self.nu, 2 * self.harmonics + 1, xp)
+        order = xp.arange(2 * self.harmonics + 1)
+        return 1j * order * self.base_frequency(system, p) * coeff
 
     def linear_operator(self, system, p, prepared=None):
         """``(L, F, C_conv)`` in SI: ``L = M D^2 + K_conv + C_conv D``, forcing vector ``F``."""

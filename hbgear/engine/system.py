@@ -48,6 +48,15 @@ shapes returned, ``is_linear`` at a probe state):
 
 - ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none); values outside
   [0, 1] and duplicates are ignored, so a traced computation may return candidates unfiltered.
+- ``derivative_forcing(s, p, xp)`` -- ``None`` (default) or ``G(s; p)``, shape
+  ``(ndof,) + s.shape``, smooth between the breakpoints and free to jump at them: ``Q_lin``
+  then holds, besides what ``force`` returns, the time derivative ``dG/dt`` taken in the sense of
+  distributions, so a jump ``[G]`` at ``t_c`` is the impulse ``[G] delta(t - t_c)``. ``force``
+  must contain no part of ``dG/dt`` (not even its pointwise part). The engine takes the Fourier
+  coefficients ``G_m`` by the quadrature between the breakpoints and adds ``i m w G_m`` to the
+  forcing (``w`` the base frequency), so the impulses are exact in the harmonic balance; a time
+  integrator of the same system applies them as velocity kicks ``M dv = [G]``. ``G`` counts as
+  forcing in the rules below (``forcing_affine_in_frequency``: ``dG/dt = w_exc dG/ds``).
 - ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
   replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
   its two trivial Floquet multipliers at 1 are dropped.
@@ -120,6 +129,10 @@ class PeriodicSystem:
         """Phases in [0, 1] where the force may jump (none by default)."""
         return xp.zeros(0)
 
+    def derivative_forcing(self, s, p, xp=np):
+        """``G(s; p)`` whose time derivative is part of the linear forcing, or ``None`` (default)."""
+        return None
+
     def frequency_scale(self, p):
         """A typical natural frequency [rad/s] (balancing of monodromy matrices); ``w_exc(p)``."""
         return self.excitation_frequency(p)
@@ -143,8 +156,8 @@ def check_system(system, p) -> None:
     """Check `system` against the contract at parameter `p` (numpy; a few force evaluations).
 
     **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
-    first broken rule: ``ndof`` not a positive integer, a mass matrix or force of the wrong shape
-    or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
+    first broken rule: ``ndof`` not a positive integer, a mass matrix, force or derivative forcing
+    of the wrong shape or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
     ``is_linear = True`` with a nonzero nonlinear part.
     """
     if not isinstance(system, PeriodicSystem):
@@ -172,6 +185,10 @@ def check_system(system, p) -> None:
         if f.shape != (n, 2) or not np.all(np.isfinite(f)):
             raise ValueError(f"{name}.force(s, q, qd, p, {part!r}, ...) returned shape {f.shape} for s of shape (2,): "
                              f"({n}, 2) finite values")
+    g = system.derivative_forcing(s, p, np)
+    if g is not None and (np.shape(g) != (n, 2) or not np.all(np.isfinite(np.asarray(g, dtype=float)))):
+        raise ValueError(f"{name}.derivative_forcing(s, p) returned shape {np.shape(g)} for s of shape (2,): "
+                         f"None or ({n}, 2) finite values")
     if system.is_linear:
         f = np.asarray(system.force(s, q, qd, p, "nonlinear", 0.0, np), dtype=float)
         if np.max(np.abs(f)) > 1e-12 * float(system.force_scale):

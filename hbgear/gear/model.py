@@ -78,7 +78,11 @@ class GearPairModel:
     - `coupling`: ``"LTI" | "LTV" | "NLTV"``; `formulation`: ``"A" | "B"``;
       `boundary`: ``"torques" | "spring" | "reaction"``;
       `damping_model`: ``"constant" | "proportional"`` (``c(t) = c k(t)/k_mean``);
-      `contact`: ``"linear"`` (teeth never separate) or ``"backlash"``.
+      `contact`: ``"linear"`` (teeth never separate) or ``"backlash"``;
+      `normal_loads`: ``"compressive"`` (MODEL.md section 11, :meth:`friction_loads`) or
+      ``"signed"`` (``sigma_j N`` / ``sigma_j F_mesh`` whatever the contact: not a physical model,
+      the linearisation along solutions with drive-flank contact and ``F_mesh > 0``; see
+      :func:`hbgear.gear.system.linear_equivalent`).
     """
 
     teeth_pinion: float
@@ -107,6 +111,7 @@ class GearPairModel:
     boundary: str = field(default="spring", metadata=dict(static=True))
     damping_model: str = field(default="constant", metadata=dict(static=True))
     contact: str = field(default="linear", metadata=dict(static=True))
+    normal_loads: str = field(default="compressive", metadata=dict(static=True))
 
     def __post_init__(self):
         # pytree unflattening may pass placeholders; only check real strings
@@ -116,10 +121,17 @@ class GearPairModel:
             ("boundary", BOUNDARIES),
             ("damping_model", ("constant", "proportional")),
             ("contact", ("linear", "backlash")),
+            ("normal_loads", ("compressive", "signed")),
         ):
             value = getattr(self, name)
             if isinstance(value, str) and value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        # LTI is linear with quasi-static friction loads (MODEL.md section 3)
+        if isinstance(self.coupling, str) and self.coupling == "LTI":
+            if isinstance(self.formulation, str) and self.formulation == "B":
+                raise ValueError("formulation 'B' (dynamic normal loads) needs coupling 'LTV' or 'NLTV', not 'LTI'")
+            if isinstance(self.contact, str) and self.contact == "backlash":
+                raise ValueError("contact 'backlash' needs coupling 'LTV' or 'NLTV', not 'LTI' (LTI is linear)")
 
     def replace(self, **changes) -> GearPairModel:
         return replace(self, **changes)
@@ -268,8 +280,9 @@ class GearPairModel:
         _, _, wm = self.speeds(omega_pinion)
         if self.coupling == "LTI":
             # Eq. 10: k_mean (delta - d_st) + c (delta' - d_st'), d_st the loaded STE fluctuation;
-            # the impulsive part of c d_st' at stiffness jumps is applied by the caller
-            # (harmonic balance: exactly in the Fourier coefficients; time integration: as kicks).
+            # here the pointwise part c eps' of c d_st'; its impulses at the stiffness jumps are
+            # dG/dt of lti_step_forcing (harmonic balance: exact Fourier coefficients of the
+            # system's derivative_forcing; time integration: velocity kicks).
             eps, deps = self.static_transmission_error(s, wm, xp)
             dst = self.loaded_static_transmission_error(s, wm, xp)
             return self.k_mean_N_per_m * (q[0] - dst) + self.mesh_damping_Ns_per_m * (qd[0] - deps)
@@ -278,28 +291,68 @@ class GearPairModel:
             qd[0] - deps
         )
 
-    def pair_friction(self, s, q, qd, omega_pinion, xp=np):
-        """Per-pair sliding velocity, friction coefficient and normal load.
+    def contact_flanks(self, s, q, omega_pinion, xp=np):
+        """``(drive, back)``: 1.0 where the drive / back flank is in contact, else 0.0.
 
-        Returns a dict of arrays of shape ``(PAIR_SLOTS,) + s.shape``: ``xi_p``, ``xi_g`` [m],
-        ``sigma``, ``vs``, ``vr`` [m/s], ``mu`` [-], ``normal`` [N] and ``friction`` =
-        ``mu N_j`` [N]. ``mu`` uses the nominal kinematics and the quasi-static load for LTI and
-        LTV, the instantaneous ones for NLTV; the normal load is ``sigma_j N`` (formulation A)
-        or ``sigma_j F_mesh`` (formulation B).
+        Without backlash the drive flank always (bilateral contact: the teeth never separate); with
+        backlash ``2b`` the drive flank while ``x = delta - eps > b``, the back flank while ``x < -b``
+        (MODEL.md sections 4, 11). Shape of ``q[0]``.
         """
+        if self.contact == "linear":
+            one = 1.0 + 0.0 * q[0]
+            return one, 0.0 * one
+        _, _, wm = self.speeds(omega_pinion)
+        eps, _ = self.static_transmission_error(s, wm, xp)
+        x = q[0] - eps
+        b = 0.5 * self.backlash_m
+        return xp.where(x > b, 1.0, 0.0), xp.where(x < -b, 1.0, 0.0)
+
+    def friction_loads(self, s, q, qd, omega_pinion, sigma, xp=np):
+        """Normal loads ``N_j >= 0`` of the pairs [N] and their part in the linear split.
+
+        MODEL.md section 11 (``normal_loads = "compressive"``): LTI ``sigma_j N``; formulation A
+        ``sigma_j N`` while the drive flank is in contact, else 0; formulation B without backlash
+        ``sigma_j |F_mesh|`` (a negative ``F_mesh`` is carried by the back flank), with backlash
+        ``sigma_j max(F_mesh, 0)`` while ``x > b``, ``sigma_j max(-F_mesh, 0)`` while ``x < -b``, 0 in
+        the dead zone. ``"signed"``: ``sigma_j N`` (A) or ``sigma_j F_mesh`` (B) at all times.
+
+        **Returns:** ``(normal, affine)``, shape ``(PAIR_SLOTS,) + ...``: ``affine`` is the part of
+        the loads that :meth:`generalized_force` puts in the linear part -- ``sigma_j N`` (LTI, A),
+        ``sigma_j F_mesh`` (LTV-B without backlash), 0 otherwise (NLTV; B with backlash) -- so
+        ``normal - affine`` vanishes while the drive flank is in contact with ``F_mesh > 0``.
+        """
+        quasi_static = sigma * self.normal_load_N
+        if self.formulation == "A":
+            normal = quasi_static
+            if self.normal_loads == "compressive" and self.contact == "backlash":
+                normal = quasi_static * self.contact_flanks(s, q, omega_pinion, xp)[0][None]
+            affine = quasi_static
+        else:
+            force = self.mesh_force(s, q, qd, omega_pinion, xp)
+            signed = sigma * force[None]
+            if self.normal_loads == "signed":
+                normal = signed
+            elif self.contact == "linear":
+                normal = sigma * xp.abs(force)[None]
+            else:
+                drive, back = self.contact_flanks(s, q, omega_pinion, xp)
+                normal = sigma * (drive * xp.maximum(force, 0.0) + back * xp.maximum(-force, 0.0))[None]
+            affine = signed if self.mesh_is_linear else 0.0 * signed
+        if self.coupling == "NLTV":
+            affine = 0.0 * affine
+        return normal, affine
+
+    def _pair_friction(self, s, q, qd, omega_pinion, xp=np):
+        """:meth:`pair_friction` and the affine part of the loads (:meth:`friction_loads`)."""
         xi_p, xi_g, _, sigma = self.pair_positions(s, xp)
         nonlinear = self.coupling == "NLTV"
         wp_tot, wg_tot = self.angular_velocities(qd, omega_pinion, nominal=not nonlinear)
         vs = xi_p * wp_tot[None] - xi_g * wg_tot[None]
         vr = xi_p * wp_tot[None] + xi_g * wg_tot[None]
-        quasi_static = sigma * self.normal_load_N
-        if self.formulation == "B":
-            normal = sigma * self.mesh_force(s, q, qd, omega_pinion, xp)[None]
-        else:
-            normal = quasi_static
-        law_load = normal if nonlinear else quasi_static
+        normal, affine = self.friction_loads(s, q, qd, omega_pinion, sigma, xp)
+        law_load = normal if nonlinear else sigma * self.normal_load_N
         mu = self.friction.mu(vs, vr, law_load / self.face_width_m, xp)
-        return {
+        pairs = {
             "xi_p": xi_p,
             "xi_g": xi_g,
             "sigma": sigma,
@@ -309,11 +362,33 @@ class GearPairModel:
             "normal": normal,
             "friction": mu * normal,
         }
+        return pairs, affine
 
-    def friction_torques(self, s, q, qd, omega_pinion, xp=np):
-        """``(T_fp, T_fg)`` [N m]: ``-sum mu_j N_j xi_p,j`` and ``+sum mu_j N_j xi_g,j``."""
-        pf = self.pair_friction(s, q, qd, omega_pinion, xp)
-        return -xp.sum(pf["friction"] * pf["xi_p"], axis=0), xp.sum(pf["friction"] * pf["xi_g"], axis=0)
+    def pair_friction(self, s, q, qd, omega_pinion, xp=np):
+        """Per-pair sliding velocity, friction coefficient and normal load.
+
+        Returns a dict of arrays of shape ``(PAIR_SLOTS,) + s.shape``: ``xi_p``, ``xi_g`` [m],
+        ``sigma``, ``vs``, ``vr`` [m/s], ``mu`` [-], ``normal`` [N] and ``friction`` =
+        ``mu N_j`` [N]. ``mu`` uses the nominal kinematics and the quasi-static load for LTI and
+        LTV, the instantaneous kinematics and the load ``N_j`` for NLTV; the normal loads
+        ``N_j >= 0`` are those of :meth:`friction_loads` (MODEL.md section 11). Back-flank contact
+        keeps the drive flank's positions, arms and sliding velocities (mirror geometry at the
+        same phase), so the friction power ``-sum mu_j N_j V_s,j`` stays <= 0.
+        """
+        return self._pair_friction(s, q, qd, omega_pinion, xp)[0]
+
+    def friction_torques(self, s, q, qd, omega_pinion, xp=np, part="all"):
+        """``(T_fp, T_fg)`` [N m]: ``-sum mu_j N_j xi_p,j`` and ``+sum mu_j N_j xi_g,j``.
+
+        `part`: ``"all"``; ``"linear"`` (the loads' affine part of :meth:`friction_loads`) or
+        ``"nonlinear"`` (the rest), the split of :meth:`generalized_force`.
+        """
+        pf, affine = self._pair_friction(s, q, qd, omega_pinion, xp)
+        if part == "all":
+            friction = pf["friction"]
+        else:
+            friction = pf["mu"] * (affine if part == "linear" else pf["normal"] - affine)
+        return -xp.sum(friction * pf["xi_p"], axis=0), xp.sum(friction * pf["xi_g"], axis=0)
 
     # -- the split into linear-periodic and nonlinear parts -------------------------------------
     @property
@@ -321,9 +396,20 @@ class GearPairModel:
         return self.contact == "linear"
 
     @property
-    def friction_is_linear(self) -> bool:
-        """Friction is affine in the state unless NLTV, or formulation B with backlash."""
+    def friction_has_linear_part(self) -> bool:
+        """Friction loads with a nonzero affine part (:meth:`friction_loads`): LTI, LTV-A, LTV-B
+        without backlash."""
         return self.coupling != "NLTV" and (self.formulation == "A" or self.mesh_is_linear)
+
+    @property
+    def friction_is_linear(self) -> bool:
+        """Friction is affine in the state (no nonlinear part): LTI; LTV formulation A without
+        backlash; with ``normal_loads = "signed"`` also LTV-A with backlash and LTV-B without."""
+        if self.coupling == "NLTV":
+            return False
+        if self.coupling == "LTI" or self.normal_loads == "signed":
+            return self.formulation == "A" or self.mesh_is_linear
+        return self.formulation == "A" and self.mesh_is_linear
 
     @property
     def is_linear(self) -> bool:
@@ -336,18 +422,19 @@ class GearPairModel:
 
         - `s`: mesh phase in [0, 1); `q`, `qd`: coordinates [m] and velocities [m/s], shape
           ``(ndof,) + s.shape``; `omega_pinion`: ``Omega_p`` [rad/s].
-        - `part`: ``"linear"`` (terms affine in ``q, q'``), ``"nonlinear"`` or ``"all"``.
+        - `part`: ``"linear"`` (terms affine in ``q, q'``), ``"nonlinear"`` or ``"all"``; the
+          friction splits by its loads (:meth:`friction_loads`: the affine part is linear).
         - `u_static`: the static wind-up ``u_s`` [m] (``"spring"``; see :meth:`static_windup`).
         - `reaction`: output force ``T_g / R_bg`` [N] (``"reaction"``: an unknown of the solver).
         """
         take_mesh = part == "all" or (part == "linear") == self.mesh_is_linear
-        take_friction = part == "all" or (part == "linear") == self.friction_is_linear
+        take_friction = part == "all" or (self.friction_has_linear_part if part == "linear" else not self.friction_is_linear)
         take_constant = part in ("all", "linear")
         zero = 0.0 * s
         rbp, rbg = self.base_radius_pinion_m, self.base_radius_gear_m
         mesh = self.mesh_force(s, q, qd, omega_pinion, xp) if take_mesh else zero
         if take_friction:
-            t_fp, t_fg = self.friction_torques(s, q, qd, omega_pinion, xp)
+            t_fp, t_fg = self.friction_torques(s, q, qd, omega_pinion, xp, part)
         else:
             t_fp = t_fg = zero
         if self.ndof == 1:
@@ -364,18 +451,27 @@ class GearPairModel:
             row2 = row2 + input_force - output - spring
         return xp.stack([row1, row2])
 
-    def lti_damping_impulse(self, s_jump, omega_pinion):
-        """Generalised impulse [N s] of ``c d_st'`` at a stiffness jump (LTI only).
+    def lti_step_forcing(self, s, xp=np):
+        """``G(s) = c N (1/k(s) - <1/k>)`` on the DTE row [N s] for LTI, else ``None``.
 
-        ``d_st = N/k(s)`` jumps where ``k`` does; ``c d_st'`` then carries ``c [d_st]`` as an
-        impulse on the DTE row, which time integration applies as a velocity kick.
+        The piecewise-constant part of ``c d_st`` (``d_st = eps + N/k(s) - <N/k>``): ``-F_mesh``
+        holds ``+c d_st'``, whose pointwise part ``c eps'`` is in :meth:`mesh_force` and whose
+        rest is ``dG/dt`` -- impulses ``c N [1/k]`` where ``k`` jumps. Shape ``(ndof,) + s.shape``.
         """
         if self.coupling != "LTI":
+            return None
+        g = self.contact_ratio
+        mean_compliance = (g - 1.0) / self.k_max_N_per_m + (2.0 - g) / self.k_min_N_per_m
+        step = self.mesh_damping_Ns_per_m * self.normal_load_N * (1.0 / self.mesh_stiffness(s, xp) - mean_compliance)
+        return xp.stack([step] + [0.0 * step] * (self.ndof - 1))
+
+    def lti_damping_impulse(self, s_jump, omega_pinion):
+        """Generalised impulse [N s] at phase `s_jump`: the jump ``[G]`` of :meth:`lti_step_forcing`
+        (zero unless LTI), which time integration applies as a velocity kick ``M dv = [G]``."""
+        if self.coupling != "LTI":
             return np.zeros(self.ndof)
-        before = self.loaded_static_transmission_error(np.asarray(s_jump - 1e-9) % 1.0, 0.0)
-        after = self.loaded_static_transmission_error(np.asarray(s_jump + 1e-9) % 1.0, 0.0)
-        impulse = self.mesh_damping_Ns_per_m * float(after - before)
-        return np.array([impulse] + [0.0] * (self.ndof - 1))
+        sides = self.lti_step_forcing(np.asarray([s_jump - 1e-9, s_jump + 1e-9]) % 1.0)
+        return np.asarray(sides[:, 1] - sides[:, 0], dtype=float)
 
     def phase_breakpoints(self) -> np.ndarray:
         """Mesh phases in [0, 1) where the equations switch (numpy; for time integration)."""

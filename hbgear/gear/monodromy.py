@@ -47,7 +47,7 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
     """Monodromy matrices over one mesh period of a linear model, batched over speeds.
 
     **Arguments:** `model`: a :class:`~hbgear.gear.model.GearPairModel` with ``model.is_linear``
-    (LTI, or LTV with teeth that never separate); `omegas`: pinion speeds [rad/s], scalar or
+    (LTI, LTV-A with teeth that never separate, or a linear equivalent with ``normal_loads = "signed"``); `omegas`: pinion speeds [rad/s], scalar or
     1-D; `substeps`: Magnus sub-steps per segment (default 1 for LTI / LTV-A, exact; for LTV-B
     doubled from 16 until converged, :func:`hbgear.engine.monodromy.monodromy_linear`); `balanced`: the matrix for ``(q, q'/w_n)``, ``w_n =
     sqrt(k_mean/m_e)`` (same eigenvalues, better conditioned).
@@ -59,8 +59,9 @@ def monodromy_linear(model, omegas, *, substeps: int | None = None, balanced: bo
     """
     if not model.is_linear:
         raise ValueError(
-            f"monodromy_linear needs a linear model (LTI/LTV without backlash), got coupling="
-            f"{model.coupling!r}, contact={model.contact!r}; use monodromy_variational or Hill"
+            f"monodromy_linear needs a linear model (LTI, LTV-A without backlash, or a linear equivalent of "
+            f"hbgear.gear.system.linear_equivalent), got coupling={model.coupling!r}, formulation="
+            f"{model.formulation!r}, contact={model.contact!r}; use monodromy_variational or Hill"
         )
     return _engine.monodromy_linear(GearSystem(model), omegas, substeps=substeps, balanced=balanced)
 

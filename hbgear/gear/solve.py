@@ -123,7 +123,25 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -
                            np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
     dense = _synthesize(coefficients[:, :1], 0.0, *_dense_basis(harmonics))[0][:, 0]
     out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
     return out
+
+
+def _impulse_power(model, omegas, coefficients, harmonics, nu):
+    """Mean power ``(1/(nu T_m)) sum_c [G]_c delta'(t_c)`` [W] of the LTI impulses ``[G]`` of
+    ``-F_mesh`` at the stiffness jumps (:meth:`GearPairModel.lti_damping_impulse`), which the
+    quadrature of ``<F_mesh delta'>`` between the jumps does not see; shape ``(P,)``, zero unless
+    LTI. ``delta'(t_c)`` of the Fourier series is the mean of its two sides, as in time integration."""
+    omegas = np.asarray(omegas, dtype=float)
+    if model.coupling != "LTI":
+        return np.zeros(omegas.shape)
+    phases = np.asarray(model.phase_breakpoints(), dtype=float)
+    impulse = np.array([model.lti_damping_impulse(s, 0.0)[0] for s in phases])  # on the DTE row
+    base = np.concatenate([(phases + j) / nu for j in range(nu)])
+    tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+    base_frequency = model.speeds(omegas)[2][:, None] / nu  # (P, 1)
+    _, velocity = _synthesize(np.asarray(coefficients)[:, 0], base_frequency, np.cos(tau), np.sin(tau))
+    return (velocity @ np.tile(impulse, nu)) * base_frequency[:, 0] / (2 * np.pi)
 
 
 #: Points per batch of :func:`read_outs` (bounds the work arrays to a few tens of MB).
@@ -243,7 +261,8 @@ def solve_periodic(
         if result is None or not result.converged:
             start_name = "given"
             if z0 is None:
-                linear = model.replace(coupling="LTV", contact="linear") if model.coupling != "LTI" else model
+                linear = (model.replace(coupling="LTV", contact="linear", normal_loads="signed")
+                          if model.coupling != "LTI" else model)
                 start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
                 z0 = np.array(start.z)
                 if model.contact == "backlash":  # the loaded teeth sit half the backlash further on

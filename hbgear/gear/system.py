@@ -7,11 +7,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from jax.tree_util import register_dataclass
 
-from ..engine.fourier import basis_size
 from ..engine.system import PeriodicSystem
 from .model import GearPairModel
 
-__all__ = ["GearSystem"]
+__all__ = ["GearSystem", "linear_equivalent"]
 
 
 @register_dataclass
@@ -52,14 +51,15 @@ class GearSystem(PeriodicSystem):
     def coefficients_independent_of_parameter(self) -> bool:
         """True when the periodic stiffness and damping coefficients do not depend on ``p``.
 
-        In a speed sweep they come from ``k(t)``, ``c(t)`` and, for formulation B with a
-        linear-friction coupling, the nominal friction factors: those depend on the speed only
-        through a law with a velocity scale (arctan, Kelley--Lemanski).
+        In a speed sweep they come from ``k(t)``, ``c(t)`` and, for formulation B with a linear
+        friction part (LTV without backlash: ``sigma_j F_mesh``), the nominal friction factors:
+        those depend on the speed only through a law with a velocity scale (arctan,
+        Kelley--Lemanski).
         """
         if self.parameter != "speed":
             return False
         m = self.model
-        friction_in_coefficients = m.friction_is_linear and m.formulation == "B"
+        friction_in_coefficients = m.friction_has_linear_part and m.formulation == "B"
         return not friction_in_coefficients or m.friction.name in ("none", "coulomb")
 
     @property
@@ -67,20 +67,22 @@ class GearSystem(PeriodicSystem):
         """True when the forcing (the linear part at ``q = q' = 0``) is ``Fbar(w) + A(s) + w B(s)``.
 
         In a speed sweep the mesh term ``-k eps - c eps'`` is affine in ``w`` (``eps' ~ w_m``),
-        the input/output torques and the spring's wind-up ``u_s(w)`` are constant in ``s``; only
-        a linear friction term with a velocity scale (arctan, Kelley--Lemanski in LTI/LTV)
-        depends on the speed otherwise. Checked numerically by the harmonic balance.
+        the input/output torques and the spring's wind-up ``u_s(w)`` are constant in ``s``, the
+        LTI impulses ``dG/dt = w_m dG/ds``; only a linear friction part with a velocity scale
+        (arctan, Kelley--Lemanski in LTI/LTV) depends on the speed otherwise. Checked
+        numerically by the harmonic balance.
         """
         if self.parameter != "speed":
             return False
         m = self.model
-        return not m.friction_is_linear or m.friction.name in ("none", "coulomb")
+        return not m.friction_has_linear_part or m.friction.name in ("none", "coulomb")
 
     @property
     def nonlinear_force_uses_displacement(self) -> bool:
         """False when ``Q_nl`` depends on the velocities only: NLTV friction in formulation A
         (loads quasi-static, ``mu`` from the sliding and rolling velocities) without backlash.
-        Backlash (the dead zone of ``delta``) and formulation-B loads (``F_mesh``) use ``q``."""
+        Backlash (the dead zone of ``delta``, the contact gate of the loads) and nonlinear
+        formulation-B loads (``|F_mesh|``, ``max(+-F_mesh, 0)``) use ``q``."""
         m = self.model
         return not m.mesh_is_linear or (not m.friction_is_linear and m.formulation == "B")
 
@@ -105,32 +107,21 @@ class GearSystem(PeriodicSystem):
         return soft_mode_estimate(model, omega, nu)
 
     def linearization(self):
-        """The linear model itself, or for a backlash model (otherwise linear) the same model with
-        teeth that never separate: ``g(x)`` has slope 1 outside the dead zone, so along a solution
-        that keeps contact the linearisation is exactly that model's."""
-        if self.model.is_linear:
-            return self
-        if self.model.contact == "backlash":
-            linear = self.model.replace(contact="linear")
-            if linear.is_linear:
-                return GearSystem(linear, self.omega_pinion, self.parameter)
-        return None
+        """The system of :func:`linear_equivalent`'s candidate (the model itself if linear; with
+        backlash or MODEL.md section 11's compressive loads, the same model with teeth that never
+        separate and signed loads), or ``None`` (NLTV)."""
+        linear = linear_equivalent(self.model)
+        if linear is None:
+            return None
+        return self if linear is self.model else GearSystem(linear, self.omega_pinion, self.parameter)
 
     def in_linear_regime(self, hb, z, p) -> bool:
-        """True unless the model has backlash and the solution enters the dead zone: ``|delta -
-        eps| > b`` on a dense grid (8 samples per harmonic, at least 1024 per base period) with a
-        margin of 1e-3 of its peak-to-peak for the values between the samples."""
+        """Whether the solution `z` (scaled unknowns of `hb`) at `p` keeps the linear equivalent
+        (:func:`linear_equivalent` with the solution: contact kept, compressive loads)."""
         model, omega = self._at(p)
-        if model.contact != "backlash":
+        if model.is_linear:
             return True
-        x = np.asarray(z, dtype=float).reshape(model.ndof, basis_size(hb.harmonics))[0] * float(self.displacement_scale)
-        f = np.linspace(0.0, 1.0, max(1024, 8 * hb.harmonics * hb.nu), endpoint=False)
-        k = np.arange(1, hb.harmonics + 1)
-        angle = 2 * np.pi * np.outer(f, k)
-        delta = x[0] + np.cos(angle) @ x[1::2] + np.sin(angle) @ x[2::2]
-        eps, _ = model.static_transmission_error((f * hb.nu) % 1.0, model.speeds(float(omega))[2], np)
-        gap = delta - np.asarray(eps)
-        return bool(np.min(np.abs(gap)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(gap)) + 1e-15)
+        return linear_equivalent(model, _SolutionView(self, hb, z, p, float(omega))) is not None
 
     @property
     def displacement_scale(self):
@@ -152,6 +143,11 @@ class GearSystem(PeriodicSystem):
         model, _ = self._at(p)
         return model.breakpoint_candidates(xp)
 
+    def derivative_forcing(self, s, p, xp=np):
+        """LTI: the stiffness-jump impulses of ``c d_st'`` (:meth:`GearPairModel.lti_step_forcing`)."""
+        model, _ = self._at(p)
+        return model.lti_step_forcing(s, xp)
+
     def force(self, s, q, qd, p, part, extra, xp=np):
         model, omega = self._at(p)
         # the spring's static wind-up enters the constant terms only (not the "nonlinear" part),
@@ -159,3 +155,63 @@ class GearSystem(PeriodicSystem):
         needs_windup = model.boundary == "spring" and part != "nonlinear"
         u_static = model.static_windup(omega, xp) if needs_windup else 0.0
         return model.generalized_force(s, q, qd, omega, part, u_static, extra, xp)
+
+
+class _SolutionView:
+    """What :func:`linear_equivalent` reads of a solution (``state_at``, ``harmonics``, ``nu``,
+    ``omega_pinion``) from the unknowns `z` of `hb` (the engine's synthesis)."""
+
+    def __init__(self, system, hb, z, p, omega_pinion):
+        from ..engine.response import synthesize
+
+        self._synthesize = synthesize
+        self._coefficients = hb.decode(system, z)[0]
+        self._base_frequency = float(hb.base_frequency(system, p))
+        self.harmonics, self.nu, self.omega_pinion = hb.harmonics, hb.nu, omega_pinion
+
+    def state_at(self, base_fraction):
+        tau = 2 * np.pi * np.asarray(base_fraction, dtype=float).ravel()
+        k = np.arange(1, self.harmonics + 1)
+        return self._synthesize(self._coefficients, self._base_frequency, np.cos(np.outer(k, tau)),
+                                np.sin(np.outer(k, tau)))
+
+
+def linear_equivalent(model: GearPairModel, solution=None) -> GearPairModel | None:
+    """The linear model whose variational equations are `model`'s along `solution`, or ``None``.
+
+    A linear `model` is its own equivalent; NLTV has none (``mu`` follows the state). Otherwise the
+    candidate is `model` with ``contact = "linear"`` and ``normal_loads = "signed"``: along a
+    solution on which the teeth stay in contact (with backlash ``2b``: ``|x| > b``, ``x = delta -
+    eps``; formulation B: the drive flank, ``x > b``, with a compressive ``F_mesh > 0``) the dead
+    zone ``g(x)`` has slope 1 and the loads of MODEL.md section 11 are the affine ``sigma_j N``
+    (A; a constant excitation also on the back flank) or ``sigma_j F_mesh`` (B), so the
+    linearisations coincide and the candidate's exact monodromy applies.
+
+    **Arguments:** `solution`: a :class:`~hbgear.gear.solve.PeriodicSolution` of `model` (anything
+    with ``state_at``, ``harmonics``, ``nu``, ``omega_pinion``), checked on a dense grid (8 samples
+    per harmonic, at least 1024 per base period) with a margin of 1e-3 of the peak-to-peak of
+    ``x`` and of ``F_mesh`` for the values between the samples; ``None``: the candidate itself
+    (whether any solution can have one).
+    """
+    if model.is_linear:
+        return model
+    if model.coupling == "NLTV":
+        return None
+    linear = model.replace(contact="linear", normal_loads="signed")
+    if solution is None:
+        return linear
+    f = np.linspace(0.0, 1.0, max(1024, 8 * solution.harmonics * solution.nu), endpoint=False)
+    q, qd = (np.asarray(a) for a in solution.state_at(f))
+    s = (f * solution.nu) % 1.0
+    omega = float(solution.omega_pinion)
+    if model.contact == "backlash":
+        eps, _ = model.static_transmission_error(s, model.speeds(omega)[2], np)
+        x = q[0] - np.asarray(eps)
+        gap = x if model.formulation == "B" else np.abs(x)
+        if not np.min(gap) - 0.5 * float(model.backlash_m) > 1e-3 * float(np.ptp(x)) + 1e-15:
+            return None
+    if model.formulation == "B":
+        force = np.asarray(model.mesh_force(s, q, qd, omega, np))
+        if not np.min(force) > 1e-3 * float(np.ptp(force)) + 1e-12 * float(model.normal_load_N):
+            return None
+    return linear
