@@ -67,10 +67,8 @@ def solution_record(solution: PeriodicSolution) -> dict:
 
 
 def floquet_of(solution: PeriodicSolution):
-    """Floquet multipliers of a solution by Hill's method (trivial ones removed)."""
-    from ..engine.hb import HarmonicBalance
-    from ..engine.floquet import hill_multipliers
-    from ..gear.system import GearSystem
+    """Floquet multipliers of a solution (trivial ones removed): Hill's method, or the variational
+    equations at many harmonics (:func:`~hbgear.gear.monodromy.solution_multipliers`)."""
+    from ..gear.monodromy import solution_multipliers
 
-    hb = HarmonicBalance(solution.model.ndof, solution.harmonics, solution.nu, solution.samples)
-    return hill_multipliers(hb, solution.z, solution.omega_pinion, GearSystem(solution.model))
+    return solution_multipliers(solution)

@@ -20,7 +20,7 @@ def waveform_rows(solution, points: int):
     """Rows of ``waveform.csv`` over one base period."""
     model = solution.model
     fraction = np.linspace(0.0, 1.0, points, endpoint=False)
-    q, qd = solution.state_at(fraction)
+    q, qd = solution.state_on_grid(points)
     s = np.mod(fraction * solution.nu, 1.0)
     period = 2 * np.pi / solution.base_frequency
     mesh = model.mesh_force(s, q, qd, solution.omega_pinion)

@@ -30,6 +30,7 @@ __all__ = [
     "monodromy_ltv_a",
     "monodromy_variational",
     "multipliers_linear",
+    "solution_multipliers",
 ]
 
 _SQRT3 = np.sqrt(3.0)
@@ -288,23 +289,24 @@ def _variational_rhs():
 
 def _state_synthesis(solution):
     """``tau -> (q, q')`` of a periodic solution at the base-period fraction ``tau`` (numpy),
-    from one matrix of its coefficients: ``[q; q'] = S [1, cos(2 pi k tau), sin(2 pi k tau)]``.
+    from one complex matrix of its coefficients: ``[q; q'] = Re S e(tau)``, ``e_k = exp(2 pi i k tau)``,
+    ``k = 0 .. H``, the powers as the outer product of ``~sqrt(H)`` low and ``~sqrt(H)`` high
+    ones (``2 sqrt(H)`` exponentials per instant instead of ``2H`` sines and cosines).
 
     In numpy, not in the compiled right-hand side: a reduction over the harmonics there makes
     XLA hand the program to its worker thread, which costs more than the whole evaluation."""
     c = np.asarray(solution.coefficients, dtype=float)  # (ndof, 2H+1): a0, a1, b1, ...
     harmonics, n = solution.harmonics, c.shape[0]
-    k = np.arange(1, harmonics + 1)
-    a, b = c[:, 1::2], c[:, 2::2]
-    synthesis = np.concatenate([
-        np.concatenate([c[:, :1], a, b], axis=1),
-        np.concatenate([np.zeros((n, 1)), solution.base_frequency * b * k, -solution.base_frequency * a * k], axis=1),
-    ])
-    orders = 2.0 * np.pi * k
+    k = np.arange(harmonics + 1)
+    position = np.concatenate([c[:, :1], c[:, 1::2] - 1j * c[:, 2::2]], axis=1)  # q = Re sum c_k e^{i k t}
+    synthesis = np.concatenate([position, 1j * solution.base_frequency * k * position])
+    low = int(np.ceil(np.sqrt(harmonics + 1)))
+    low_orders = 2j * np.pi * np.arange(low)
+    high_orders = 2j * np.pi * low * np.arange(-(-(harmonics + 1) // low))
 
     def state(tau):
-        angle = orders * tau
-        x = synthesis @ np.concatenate([[1.0], np.cos(angle), np.sin(angle)])
+        powers = (np.exp(high_orders * tau)[:, None] * np.exp(low_orders * tau)[None]).ravel()[: harmonics + 1]
+        x = (synthesis @ powers).real
         return x[:n], x[n:]
 
     return state
@@ -392,6 +394,28 @@ def monodromy_variational(
 
 
 # ============================================================================ dispatch
+
+
+def solution_multipliers(solution) -> np.ndarray:
+    """Floquet multipliers of a :class:`~hbgear.gear.solve.PeriodicSolution` over its base period,
+    trivial ones dropped, sorted by decreasing modulus.
+
+    Hill's method on the harmonic-balance Jacobian where the discretisation is dense; on the
+    structured path (many harmonics, :attr:`hbgear.engine.hb.HarmonicBalance.structured`) the
+    variational equations (:func:`monodromy_variational`): Hill's matrices would be
+    ``(size x size)`` and its eigenproblem ``O(size^3)``, while the variational equations cost
+    the same at any ``H`` (the solution enters only through its state along the period).
+    """
+    from ..engine.hb import HarmonicBalance
+    from .system import GearSystem
+
+    model = solution.model
+    hb = HarmonicBalance(model.ndof, solution.harmonics, solution.nu, solution.samples)
+    if not hb.structured:
+        return hill_multipliers(hb, solution.z, solution.omega_pinion, GearSystem(model))
+    phi = monodromy_variational(model, solution, solution.omega_pinion)
+    multipliers = _drop_trivial(np.linalg.eigvals(phi), model.boundary)
+    return multipliers[np.argsort(-np.abs(multipliers), kind="stable")]
 
 
 def floquet_multipliers(

@@ -24,7 +24,7 @@ from ..engine.hb import HarmonicBalance, _breakpoint_key
 from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
 from ..engine.newton import newton
-from ..engine.quadrature import mesh_period_rule
+from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis, mesh_period_rule
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -75,9 +75,17 @@ class PeriodicSolution:
         k = np.arange(1, self.harmonics + 1)
         return _synthesize(self.coefficients, self.base_frequency, np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
 
+    def state_on_grid(self, points: int):
+        """``(q, qd)`` at the base-period fractions ``j / points``, ``j < points``, shapes
+        ``(ndof, points)``: :meth:`state_at` on a uniform grid by FFT (``points >= 2H + 2``)."""
+        if points < 2 * self.harmonics + 2:
+            return self.state_at(np.arange(points) / points)
+        velocity = fourier.differentiate(self.coefficients, self.harmonics, self.base_frequency)
+        return tuple(fourier.synthesize(c, self.harmonics, points) for c in (self.coefficients, velocity))
+
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
-        base, s, w, _, _ = _read_out_rule(_breakpoint_key(GearSystem(self.model), self.omega_pinion), self.harmonics,
+        base, s, w, _ = _read_out_rule(_breakpoint_key(GearSystem(self.model), self.omega_pinion), self.harmonics,
                                           self.nu)
         return base, s, w
 
@@ -147,14 +155,29 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
     [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]
-    _, s, w, cos, sin = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
+    _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
-    q, qd = _synthesize(coefficients, base_frequency, cos, sin)
+    q, qd = _node_states(coefficients, base_frequency, basis, nu)
     out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
                            np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
-    dense = _synthesize(coefficients[:, :1], 0.0, *_dense_basis(harmonics))[0][:, 0]
+    # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
+    dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
     out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
     return out
+
+
+def _node_states(coefficients, base_frequency, basis, nu: int):
+    """``(q, qd)`` at the read-out rule's nodes (:func:`_read_out_rule`), shapes ``(..., ndof, nodes)``:
+    from the trigonometric basis ``(cos, sin)``, or by chirp transforms from a lattice rule (the
+    nodes of base period ``j`` of ``nu`` at ``(j + s) / nu``)."""
+    if not isinstance(basis, LatticeRule):
+        return _synthesize(coefficients, base_frequency, *basis)
+    c = np.asarray(coefficients, dtype=float)
+    k = np.arange(c.shape[-1] // 2 + 1)
+    position = np.concatenate([c[..., :1], c[..., 1::2] - 1j * c[..., 2::2]], axis=-1)  # x = Re sum c_k e^{i k tau}
+    states = [np.concatenate([lattice_synthesis(a, basis, j / nu, 1.0 / nu) for j in range(nu)], axis=-1)
+              for a in (position, 1j * k * position)]
+    return states[0], base_frequency * states[1]
 
 
 #: Points per batch of :func:`read_outs` (bounds the work arrays to a few tens of MB).
@@ -173,25 +196,28 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
     return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
 
 
-@lru_cache(maxsize=16)
-def _dense_basis(harmonics: int):
-    """``cos(k tau)``, ``sin(k tau)`` on ``16 H + 1`` uniform points of the base period (the
-    peak-to-peak read-out between quadrature nodes); cached, read-only."""
-    tau = 2 * np.pi * np.linspace(0.0, 1.0, 16 * harmonics + 1)
-    k = np.arange(1, harmonics + 1)
-    cos, sin = np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau))
-    cos.flags.writeable = sin.flags.writeable = False
-    return cos, sin
+#: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by
+#: chirp transforms (:func:`~hbgear.engine.quadrature.lattice_synthesis`) instead of a
+#: trigonometric basis of ``H x ~34 H / nu`` entries (36 MB at H = 256, 2.3 GB at H = 2048).
+READ_OUT_LATTICE_HARMONICS = 128
 
 
 @lru_cache(maxsize=32)
 def _read_out_rule(breakpoints: tuple, harmonics: int, nu: int):
-    """Quadrature over one base period for read-outs, with its trigonometric basis (cached per geometry)."""
-    s, w = mesh_period_rule(np.asarray(breakpoints), 2 * harmonics // nu + 8)
-    s, w = np.asarray(s), np.asarray(w)
+    """Quadrature over one base period for read-outs, with what synthesises a solution at its
+    nodes (cached per geometry): ``(base, s, w, basis)``, `basis` the trigonometric basis
+    ``(cos, sin)`` or, from :data:`READ_OUT_LATTICE_HARMONICS` on, the lattice rule."""
+    order = 2 * harmonics // nu + 8
+    if harmonics >= READ_OUT_LATTICE_HARMONICS:
+        basis = lattice_rule(np.asarray(breakpoints), order)
+        s, w = basis.nodes, basis.weights
+    else:
+        s, w = (np.asarray(a) for a in mesh_period_rule(np.asarray(breakpoints), order))
     base = np.concatenate([(j + s) / nu for j in range(nu)])
-    tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
-    return base, np.tile(s, nu), np.tile(w, nu) / nu, np.cos(tau), np.sin(tau)
+    if harmonics < READ_OUT_LATTICE_HARMONICS:
+        tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+        basis = np.cos(tau), np.sin(tau)
+    return base, np.tile(s, nu), np.tile(w, nu) / nu, basis
 
 
 def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
@@ -200,15 +226,20 @@ def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
 
 
 def _newton(hb, system, omega, z0, tolerance, max_iterations):
-    # (R, dR/dz, dR/dp), the evaluation continuation uses, with dR/dp dropped: a start solution
-    # followed by a curve then traces and compiles one Jacobian function, not two
+    # dense path: (R, dR/dz, dR/dp), the evaluation continuation uses, with dR/dp dropped (a start
+    # solution followed by a curve then traces and compiles one Jacobian function, not two);
+    # structured path (many harmonics, the engine decides by size): the matrix-free linearisation
+    prepared = hb.prepare(system)
+
     def both(z):
-        return hb.residual_and_jacobians(jnp.asarray(z), omega, system)[:2]
+        return hb.residual_and_linearization(jnp.asarray(z), omega, system, prepared)
 
     def resid(z):
-        return hb.residual(jnp.asarray(z), omega, system)
+        return hb.residual(jnp.asarray(z), omega, system, prepared)
 
-    return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations)
+    # a linear model is one step: its Krylov solve goes to the tolerance at once
+    linear_rtol = 0.1 * tolerance if system.is_linear else None
+    return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations, linear_rtol=linear_rtol)
 
 
 _STATIC_START_ITERATIONS = 10
