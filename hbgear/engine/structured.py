@@ -209,14 +209,14 @@ def _product(hb, free_slot, lin: Linearization, v):
     return out if slot is None else out.at[slot].add(v[slot])
 
 
-def _precondition(hb, lin: Linearization, v):
+def _precondition(hb, inverse_mean, inverse_blocks, v, xp=jnp):
     """``Jbar^{-1} v``: one small solve per harmonic (the inverted mean-Jacobian blocks)."""
     n, H = hb.ndof, hb.harmonics
     x = v.reshape(n, hb.block)
-    pairs = jnp.concatenate([x[:, 1::2].T, x[:, 2::2].T], axis=1)  # (H, 2n): a_k then b_k of every coordinate
-    solved = jnp.einsum("kij,kj->ki", lin.inverse_blocks, pairs)
-    out = jnp.stack([solved[:, :n].T, solved[:, n:].T], axis=-1).reshape(n, 2 * H)
-    return jnp.concatenate([(lin.inverse_mean @ x[:, 0])[:, None], out], axis=1).reshape(hb.size)
+    pairs = xp.concatenate([x[:, 1::2].T, x[:, 2::2].T], axis=1)  # (H, 2n): a_k then b_k of every coordinate
+    solved = xp.einsum("kij,kj->ki", inverse_blocks, pairs)
+    out = xp.stack([solved[:, :n].T, solved[:, n:].T], axis=-1).reshape(n, 2 * H)
+    return xp.concatenate([(inverse_mean @ x[:, 0])[:, None], out], axis=1).reshape(hb.size)
 
 
 @partial(jax.jit, static_argnums=(0, 1))
@@ -226,12 +226,7 @@ def _product_jit(hb, free_slot, lin, v):
 
 @partial(jax.jit, static_argnums=(0, 1))
 def _preconditioned_product_jit(hb, free_slot, lin, v):
-    return _product(hb, free_slot, lin, _precondition(hb, lin, v))
-
-
-@partial(jax.jit, static_argnums=0)
-def _precondition_jit(hb, lin, v):
-    return _precondition(hb, lin, v)
+    return _product(hb, free_slot, lin, _precondition(hb, lin.inverse_mean, lin.inverse_blocks, v))
 
 
 class StructuredJacobian:
@@ -243,12 +238,16 @@ class StructuredJacobian:
 
     def __init__(self, hb, free_slot, lin: Linearization):
         self.hb, self.free_slot, self.linearization = hb, free_slot, lin
+        self._inverses = None
 
     def matvec(self, v) -> np.ndarray:
         return np.asarray(_product_jit(self.hb, self.free_slot, self.linearization, jnp.asarray(v)))
 
     def precondition(self, v) -> np.ndarray:
-        return np.asarray(_precondition_jit(self.hb, self.linearization, jnp.asarray(v)))
+        """In numpy (once per solve: not worth a compiled program of its own)."""
+        if self._inverses is None:
+            self._inverses = np.asarray(self.linearization.inverse_mean), np.asarray(self.linearization.inverse_blocks)
+        return _precondition(self.hb, *self._inverses, np.asarray(v, dtype=float), np)
 
     def solve(self, b, rtol: float) -> tuple[np.ndarray, KrylovInfo]:
         """GMRES(:data:`RESTART`) with the mean-Jacobian preconditioner on the right, at most
