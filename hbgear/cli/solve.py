@@ -25,11 +25,11 @@ def waveform_rows(solution, points: int):
     period = 2 * np.pi / solution.base_frequency
     mesh = model.mesh_force(s, q, qd, solution.omega_pinion)
     pairs = model.pair_friction(s, q, qd, solution.omega_pinion)
-    for i in range(points):
-        row = [fraction[i] * period, s[i], 1e6 * q[0, i], qd[0, i], mesh[i]]
-        for k in range(PAIR_SLOTS):
-            row += [pairs["normal"][k, i] * (pairs["sigma"][k, i] > 0), pairs["mu"][k, i], pairs["friction"][k, i], pairs["vs"][k, i]]
-        yield row
+    columns = [fraction * period, s, 1e6 * q[0], qd[0], mesh]
+    for k in range(PAIR_SLOTS):
+        columns += [pairs["normal"][k] * (pairs["sigma"][k] > 0), pairs["mu"][k], pairs["friction"][k], pairs["vs"][k]]
+    # whole columns to Python floats at once (16 H rows at many harmonics)
+    yield from zip(*(np.asarray(c, dtype=float).tolist() for c in columns))
 
 
 def waveform_header():

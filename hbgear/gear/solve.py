@@ -242,6 +242,12 @@ def _newton(hb, system, omega, z0, tolerance, max_iterations):
     return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations, linear_rtol=linear_rtol)
 
 
+def _steps(result) -> str:
+    """How many Newton steps (and GMRES products, on the structured path) a result took."""
+    krylov = f", {result.linear_iterations} GMRES products" if result.linear_iterations else ""
+    return f"{result.iterations} iterations{krylov}"
+
+
 _STATIC_START_ITERATIONS = 10
 
 
@@ -308,7 +314,7 @@ def solve_periodic(
         if guess is not None:
             z0 = guess
             result = _newton(hb, system, omega, z0, tolerance, min(max_iterations, _STATIC_START_ITERATIONS))
-            tried.append(f"Newton from the quasi-static state ({result.iterations} iterations)")
+            tried.append(f"Newton from the quasi-static state ({_steps(result)})")
             z0 = z0 if result.converged else None
         if result is None or not result.converged:
             start_name = "given"
@@ -320,7 +326,7 @@ def solve_periodic(
                     z0[0] += 0.5 * float(model.backlash_m) / float(system.displacement_scale)
                 start_name = "LTV"
             result = _newton(hb, system, omega, z0, tolerance, max_iterations)
-            tried.append(f"Newton from the {start_name} start ({result.iterations} iterations)")
+            tried.append(f"Newton from the {start_name} start ({_steps(result)})")
         name = _smoothing_field(model)
         if not result.converged and name is not None:
             target = getattr(model.friction, name)
