@@ -60,6 +60,7 @@ def main(argv=None):
 def _run(q):
     import bench_duffing_tools
     import bench_frc_vs_ti
+    import bench_large_harmonics
     import bench_newton_breakdown
     import bench_stability_map
 
@@ -80,6 +81,9 @@ def _run(q):
     print("\n## 4. where the time of a continuation step goes", flush=True)
     b, protos = bench_newton_breakdown.run(q)
     print(bench_newton_breakdown.table(b, protos), flush=True)
+    print("\n## 5. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
+    large = bench_large_harmonics.run(q)
+    print(bench_large_harmonics.table(large), flush=True)
 
     t = b["timer"]
     pts = b["points"]
@@ -128,6 +132,17 @@ def _run(q):
          f"{100 * (t.total.get('eval (R,J,dR/dp)', 0) + t.total.get('eval R (line search)', 0)) / b['wall']:.0f} %", ""),
         ("4", "share in linear algebra",
          f"{100 * sum(v for k, v in t.total.items() if k.startswith('linalg.')) / b['wall']:.0f} %", ""),
+    ]
+    first, warm = large["command"][0], large["command"][-1]
+    structured = [c for c in large["cases"] if c["operator"] == "structured"]
+    rows += [
+        ("5", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
+         "<= 10 s"),
+        ("5", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
+        ("5", "H = 2048 solve, peak resident memory (largest run)",
+         f"{max(c['rss_mb'] for c in large['command']):.0f} MB", "<= 2 GB"),
+        ("5", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
+         f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")
