@@ -18,7 +18,10 @@ state to compile, then three timed solves (one when the first took over 10 s); a
 time between two successive linearisations (linearise, linear solve, line search), the median
 over the timed steps is reported with the
 GMRES products per step, the bytes of the prepared operator and Jacobian, the residual reached
-and the DTE RMS. The slope of log(step time) vs log(H) is fitted over all structured sizes and
+and the DTE RMS. Part 2 runs with one BLAS thread (``--blas-threads``): on this shared 2-core
+machine under load, OpenBLAS's two threads made one LU of 258-1026 unknowns 20-500x slower
+than one thread (0.36 vs 188 ms at 258, load average ~7), which would measure the machine's
+load instead of the methods. The slope of log(step time) vs log(H) is fitted over all structured sizes and
 over H >= 256.
 
 Part 3 -- **accuracy**: dense vs structured at each H where both ran (the DTE coefficients and
@@ -145,7 +148,8 @@ def slope(rows, low: int = 0) -> float:
     return float(np.polyfit(np.log([r["H"] for r in chosen]), np.log([r["step_s"] for r in chosen]), 1)[0])
 
 
-def run(quick: bool = False, dense_max: int | None = None, command_runs: int = 2, harmonics_list=HARMONICS) -> dict:
+def run(quick: bool = False, dense_max: int | None = None, command_runs: int = 2, harmonics_list=HARMONICS,
+        blas_threads: int | None = 1) -> dict:
     dense_max = dense_max or (512 if quick else 1024)
     out = {"command": [], "cases": []}
     with tempfile.TemporaryDirectory(prefix="hbgear-large-h-") as tmp:
@@ -153,13 +157,18 @@ def run(quick: bool = False, dense_max: int | None = None, command_runs: int = 2
             out["command"].append(run_command(Path(tmp) / f"run{k}"))
             print(f"  command run {k + 1}: {out['command'][-1]['wall_s']:.1f} s, "
                   f"{out['command'][-1]['rss_mb']:.0f} MB peak", flush=True)
-    for harmonics in harmonics_list:
-        for operator in ("dense", "structured"):
-            if operator == "dense" and harmonics > dense_max:
-                continue
-            case = newton_case(harmonics, operator)
-            out["cases"].append(case)
-            print(f"  H = {harmonics:4d} {operator:10s} step {1e3 * case['step_s']:8.1f} ms", flush=True)
+    import scipy.linalg  # noqa: F401  (loaded before the limit below: it has its own BLAS)
+    from threadpoolctl import threadpool_limits
+
+    out["blas_threads"] = blas_threads
+    with threadpool_limits(blas_threads):
+        for harmonics in harmonics_list:
+            for operator in ("dense", "structured"):
+                if operator == "dense" and harmonics > dense_max:
+                    continue
+                case = newton_case(harmonics, operator)
+                out["cases"].append(case)
+                print(f"  H = {harmonics:4d} {operator:10s} step {1e3 * case['step_s']:8.1f} ms", flush=True)
     return out
 
 
@@ -170,7 +179,8 @@ def table(out: dict) -> str:
         lines.append(f"{k:4d} {c['wall_s']:7.2f}s {c['rss_mb']:8.0f}MB {c['dte_rms_um']:16.10f} "
                      f"{c['max_abs_floquet']:14.10f} {c['newton']:7d}")
     lines.append("  (run 1 compiles into the disk cache, run 2 loads from it)")
-    lines += ["", "part 2: one Newton step vs H (median over the steps of up to 3 timed solves after a compiling one)",
+    lines += ["", "part 2: one Newton step vs H (median over the steps of up to 3 timed solves after a compiling one; "
+              f"BLAS threads: {out.get('blas_threads') or 'default'})",
               f"{'H':>5s} {'size':>6s} {'path':>10s} {'step ms':>9s} {'steps':>5s} {'GMRES/step':>10s} "
               f"{'operator MB':>11s} {'residual':>9s} {'DTE rms um':>15s}"]
     for c in out["cases"]:
@@ -196,7 +206,8 @@ def table(out: dict) -> str:
     diffs = [None] + [b - a for a, b in zip(rms, rms[1:])]
     ratios = [None, None] + [a / b for a, b in zip(diffs[1:], diffs[2:])]
     for i, c in enumerate(structured):
-        predicted = diffs[i - 1] / ratios[i - 1] if i >= 3 else None  # the previous ratio carried on
+        # the previous ratio carried on, once the changes shrink monotonically
+        predicted = diffs[i - 1] / ratios[i - 1] if i >= 3 and ratios[i - 1] > 1 else None
         lines.append(f"{c['H']:5d} {c['dte_rms_um']:24.12f} {_num(diffs[i], 20, '.3e')} {_num(ratios[i], 6, '.2f')} "
                      f"{_num(predicted, 12, '.3e')}")
     return "\n".join(lines)
@@ -212,8 +223,10 @@ def main(argv=None) -> int:
     parser.add_argument("--dense-max", type=int, default=None, help="largest H for the dense path")
     parser.add_argument("--harmonics", type=int, nargs="+", default=list(HARMONICS), help="the H of part 2")
     parser.add_argument("--command-runs", type=int, default=2, help="runs of the H = 2048 command (part 1)")
+    parser.add_argument("--blas-threads", type=int, default=1,
+                        help="BLAS threads in part 2 (0: the libraries' default)")
     args = parser.parse_args(argv)
-    print(table(run(args.quick, args.dense_max, args.command_runs, tuple(args.harmonics))))
+    print(table(run(args.quick, args.dense_max, args.command_runs, tuple(args.harmonics), args.blas_threads or None)))
     return 0
 
 

@@ -21,6 +21,11 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 Jacobians come from ``jax.jacfwd``: with respect to ``X`` and to the parameter ``p``.
 The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 ``D2 = M (x) I`` and ``D1 = 2 M (x) D + dR/d(velocity coefficients)``.
+
+Many harmonics: from :data:`STRUCTURED_MIN_SIZE` unknowns on, :meth:`HarmonicBalance.prepare`
+builds the structured path instead (:mod:`hbgear.engine.structured`: the same residual by FFT
+products, Newton steps by preconditioned GMRES, no ``(size x size)`` array);
+:meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose.
 """
 
 from __future__ import annotations
@@ -45,9 +50,12 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
 #: From this many unknowns ``n (2H+1)`` on, ``operator="auto"`` takes the structured path
 #: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the mean-Jacobian preconditioner,
 #: no ``(size x size)`` array); below it the dense Jacobian and its LU. Measured on the NLTV gear
-#: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores): a Newton step costs the
-#: same both ways near 1000 unknowns (H ~ 256 with 2 coordinates); below, the dense LU is
-#: cheaper and the step is exact; above, LU grows like size^3 and its matrices like size^2.
+#: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores, one BLAS thread), one
+#: Newton step dense / structured: 1.1 / 2.6 ms at 258 unknowns (H = 64), 3.7 / 6.5 ms at 514,
+#: 30.5 / 8.7 ms at 1026, 181 / 14 ms at 2050: the crossover lies between 514 and 1026. Below
+#: it the dense step is also exact and Hill's method and continuation, which need the dense
+#: Jacobian, keep their frozen matrices; above it the dense LU grows like size^3, its matrices
+#: like size^2.
 STRUCTURED_MIN_SIZE = 1000
 
 

@@ -189,11 +189,11 @@ def lattice_rule(breakpoints, max_order: int) -> LatticeRule:
     lattice = start[:, None] + step[:, None] * np.arange(length)[None]
     if np.max(np.abs(nodes[index] - lattice) * mask, initial=0.0) > 1e-13:
         raise AssertionError("the mesh-period rule's uniform sub-intervals are not the progressions expected")
-    orders = np.arange(max_order + 1)
     pre, kernel, post = _chirp_factors(2 * np.pi * step, length, max_order + 1)
     pre = pre * mask * weights[index]
-    post = post * np.exp(-2j * np.pi * np.outer(start, orders))
-    direct_kernel = np.exp(-2j * np.pi * np.outer(nodes[direct], orders)) * weights[direct][:, None]
+    post = post * _powers(-start, max_order + 1)
+    direct_kernel = np.ascontiguousarray(_powers(-nodes[direct], max_order + 1))
+    direct_kernel *= weights[direct][:, None]
     return LatticeRule(nodes, weights, start, step, index, mask, pre, kernel, post, direct, direct_kernel)
 
 
@@ -220,9 +220,8 @@ def lattice_synthesis(coefficients, rule: LatticeRule, shift: float = 0.0, scale
     """
     c = np.asarray(coefficients)
     flat = c.reshape(-1, c.shape[-1])
-    k = np.arange(c.shape[-1])
-    twist = np.exp(2j * np.pi * np.outer(shift + scale * rule.start, k))  # (P, K+1)
-    basis = np.exp(2j * np.pi * np.outer(k, shift + scale * rule.nodes[rule.direct]))  # (K+1, D)
+    twist = _powers(shift + scale * rule.start, c.shape[-1])  # (P, K+1)
+    basis = _powers(shift + scale * rule.nodes[rule.direct], c.shape[-1]).T  # (K+1, D)
     keep = rule.mask > 0
     out = np.empty((flat.shape[0], rule.nodes.shape[0]))
     rows = max(1, block // max(1, twist.size))
@@ -232,6 +231,17 @@ def lattice_synthesis(coefficients, rule: LatticeRule, shift: float = 0.0, scale
         out[i : i + rows, rule.index[keep]] = values[:, keep].real
         out[i : i + rows, rule.direct] = (part @ basis).real
     return out.reshape(c.shape[:-1] + (rule.nodes.shape[0],))
+
+
+def _powers(t, count: int) -> np.ndarray:
+    """``exp(2 pi i k t)`` for ``k < count``, shape ``t.shape + (count,)`` (numpy): products of
+    ``~sqrt(count)`` low and high powers, each an exponential (``2 sqrt(count)`` exponentials
+    per ``t`` instead of ``count``; rounding as of two exponentials)."""
+    t = np.asarray(t, dtype=float)[..., None]
+    low = int(np.ceil(np.sqrt(count)))
+    lows = np.exp(2j * np.pi * t * np.arange(low))
+    highs = np.exp(2j * np.pi * t * (low * np.arange(-(-count // low))))
+    return (highs[..., :, None] * lows[..., None, :]).reshape(t.shape[:-1] + (-1,))[..., :count]
 
 
 def _chirp(x, theta, out_len: int, xp=np):

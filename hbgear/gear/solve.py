@@ -175,8 +175,8 @@ def _node_states(coefficients, base_frequency, basis, nu: int):
     c = np.asarray(coefficients, dtype=float)
     k = np.arange(c.shape[-1] // 2 + 1)
     position = np.concatenate([c[..., :1], c[..., 1::2] - 1j * c[..., 2::2]], axis=-1)  # x = Re sum c_k e^{i k tau}
-    states = [np.concatenate([lattice_synthesis(a, basis, j / nu, 1.0 / nu) for j in range(nu)], axis=-1)
-              for a in (position, 1j * k * position)]
+    both = np.stack([position, 1j * k * position])  # one synthesis for q and q'
+    states = np.concatenate([lattice_synthesis(both, basis, j / nu, 1.0 / nu) for j in range(nu)], axis=-1)
     return states[0], base_frequency * states[1]
 
 
