@@ -219,7 +219,7 @@ class HarmonicBalance:
         """The :class:`~hbgear.engine.quadrature.LatticeRule` of :meth:`_rule`'s nodes, in numpy and
         as device arrays."""
         rule = lattice_rule(np.asarray(_breakpoint_key(system, p)), self.max_mesh_order)
-        return rule, LatticeRule(*(jnp.asarray(a) for a in rule))
+        return rule, jax.device_put(rule)  # no compiled copy per array (jnp.asarray here: one each)
 
     def _frozen_jumps(self, system) -> JumpLayout | None:
         """The jump layout of :meth:`_sample_points` (device arrays) when the breakpoints do not
@@ -228,7 +228,7 @@ class HarmonicBalance:
         sawtooth signals) at every residual evaluation."""
         if not system.coefficients_independent_of_parameter:
             return None
-        return JumpLayout(*(jnp.asarray(a) for a in self._jump_layout(system, 1.0)))
+        return JumpLayout(*jax.device_put(tuple(self._jump_layout(system, 1.0))))
 
     def _frozen_operator(self, system, p, rule) -> FrozenOperator | None:
         """The parameter-independent pieces of the linear operator, when the system declares them so.
@@ -291,7 +291,7 @@ class HarmonicBalance:
         error = np.max(np.abs(self._combined_forcing(system, 2.0, pieces, np) - f_c))
         if not (np.isfinite(error) and error <= 1e-11 * (np.max(np.abs(f_c)) + 1e-300)):
             return None  # the declared structure does not hold: full quadrature every call
-        return ForcingPieces(*(jnp.asarray(a) for a in pieces))
+        return ForcingPieces(*jax.device_put(tuple(np.asarray(a) for a in pieces)))
 
     def _point_forcing(self, system, p, s_star, xp=jnp):
         zero = xp.zeros((self.ndof, 1))

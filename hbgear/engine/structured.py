@@ -111,7 +111,7 @@ def prepare_structured(hb, system, p, lattice, device_lattice) -> StructuredOper
         return StructuredOperator(device_lattice)
     _, stiffness, damping = hb._periodic_coefficients(system, p, lattice, np)
     samples = [_samples(c, hb.harmonics, np) for c in (stiffness, damping)]
-    return StructuredOperator(device_lattice, *(jnp.asarray(a) for a in (stiffness, damping, *samples)),
+    return StructuredOperator(device_lattice, *jax.device_put((stiffness, damping, *samples)),
                               hb._forcing_pieces(system, lattice))
 
 
