@@ -154,11 +154,13 @@ class LatticeRule(NamedTuple):
     direct_kernel: Any
 
 
-def lattice_rule(breakpoints, max_order: int) -> LatticeRule:
+def lattice_rule(breakpoints, max_order: int, coefficients: bool = True) -> LatticeRule:
     """The :class:`LatticeRule` of ``mesh_period_rule(breakpoints, max_order)`` (numpy).
 
     The progressions are read off the construction of :func:`_proportional_pieces` (15 graded
     cells, ``m - 2`` uniform ones, 15 graded cells per interval) and checked against the nodes.
+    `coefficients`: build the factors of :func:`lattice_coefficients` (``False``: ``None``,
+    a rule for :func:`lattice_synthesis` only, without the ``D x (R+1)`` direct kernel).
     """
     a, b, sub = _intervals(np.asarray(breakpoints), max_order)
     x, _ = _gauss_legendre()
@@ -189,6 +191,8 @@ def lattice_rule(breakpoints, max_order: int) -> LatticeRule:
     lattice = start[:, None] + step[:, None] * np.arange(length)[None]
     if np.max(np.abs(nodes[index] - lattice) * mask, initial=0.0) > 1e-13:
         raise AssertionError("the mesh-period rule's uniform sub-intervals are not the progressions expected")
+    if not coefficients:
+        return LatticeRule(nodes, weights, start, step, index, mask, None, None, None, direct, None)
     pre, kernel, post = _chirp_factors(2 * np.pi * step, length, max_order + 1)
     pre = pre * mask * weights[index]
     post = post * _powers(-start, max_order + 1)

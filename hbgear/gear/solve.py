@@ -209,7 +209,7 @@ def _read_out_rule(breakpoints: tuple, harmonics: int, nu: int):
     ``(cos, sin)`` or, from :data:`READ_OUT_LATTICE_HARMONICS` on, the lattice rule."""
     order = 2 * harmonics // nu + 8
     if harmonics >= READ_OUT_LATTICE_HARMONICS:
-        basis = lattice_rule(np.asarray(breakpoints), order)
+        basis = lattice_rule(np.asarray(breakpoints), order, coefficients=False)
         s, w = basis.nodes, basis.weights
     else:
         s, w = (np.asarray(a) for a in mesh_period_rule(np.asarray(breakpoints), order))
