@@ -8,8 +8,7 @@ Part 1 -- **the command** ``hbgear solve examples/paper_table1.toml --speed 200 
 friction.model=NLTV --set friction.law=arctan --set solver.harmonics=2048 --set
 solver.time_samples=8200``, in a fresh process, twice: the first compiles into the disk cache
 (``HBGEAR_CACHE_DIR``: empty when run from ``run.py``), the second loads from it. Wall time of
-the whole process and its peak resident memory (``getrusage(RUSAGE_SELF).ru_maxrss`` of the
-child, read at its exit); DTE RMS and ``max_abs_floquet`` from its ``solution.json``.
+the whole process and its peak resident memory (``VmHWM`` of the child at its exit); DTE RMS and ``max_abs_floquet`` from its ``solution.json``.
 
 Part 2 -- **one Newton step vs H**, ``H = 64 .. 2048``, dense (up to ``--dense-max``, default
 1024: at 2048 its matrices and rule kernel need ~8 GB) and structured (forced with
@@ -53,12 +52,18 @@ SPEED_RPM, TOL = 200.0, 1e-9
 HARMONICS = (64, 128, 256, 512, 1024, 2048)
 REPEATS = 3  # timed solves per case (1 when the compiling one took over 10 s)
 
-# the child of part 1: run the CLI, then report its own peak memory on the last line of stderr
+# the child of part 1: run the CLI, then report its own peak memory on the last line of stderr:
+# VmHWM of /proc/self/status (this process image's peak; getrusage's ru_maxrss survives exec and
+# so reports a large parent's size instead, e.g. under run.py)
 _CHILD = """
 import json, resource, sys
 from hbgear.cli import main
 code = main(sys.argv[1:])
-print(json.dumps({"maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}), file=sys.stderr)
+try:
+    peak = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:"))
+except (OSError, StopIteration):
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"maxrss_kb": peak}), file=sys.stderr)
 sys.exit(code)
 """
 

@@ -200,9 +200,10 @@ class HarmonicBalance:
         # call): the caches must never hold tracers
         with jax.ensure_compile_time_eval():
             if self.structured:
-                lattice = _RULES.get_or_make((_breakpoint_key(system, p), self.max_mesh_order, "lattice"),
+                breakpoints = _breakpoint_key(system, p)
+                lattice = _RULES.get_or_make((breakpoints, self.max_mesh_order, "lattice"),
                                              lambda: self._lattice(system, p))
-                pieces = _FROZEN.get_or_make(self._content_key(system, "structured"),
+                pieces = _FROZEN.get_or_make(self._content_key(system, "structured", breakpoints),
                                              lambda: structured.prepare_structured(self, system, p, *lattice))
                 return Prepared(pieces.lattice.nodes, None, None, None, self._frozen_jumps(system), pieces)
             rule = _RULES.get_or_make((_breakpoint_key(system, p), self.max_mesh_order),
