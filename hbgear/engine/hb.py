@@ -51,8 +51,9 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
 #: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the mean-Jacobian preconditioner,
 #: no ``(size x size)`` array); below it the dense Jacobian and its LU. Measured on the NLTV gear
 #: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores, one BLAS thread), one
-#: Newton step dense / structured: 1.1 / 2.6 ms at 258 unknowns (H = 64), 3.7 / 6.5 ms at 514,
-#: 30.5 / 8.7 ms at 1026, 181 / 14 ms at 2050: the crossover lies between 514 and 1026. Below
+#: Newton step dense / structured: 0.9 / 2.7 ms at 258 unknowns (H = 64), 6.2 / 6.4 ms at 514,
+#: 36.6 / 7.9 ms at 1026, 274 / 15 ms at 2050 (an earlier run: 1.1 / 2.6, 3.7 / 6.5, 30.5 / 8.7,
+#: 181 / 14 ms): the crossover lies between 514 and 1026 unknowns. Below
 #: it the dense step is also exact and Hill's method and continuation, which need the dense
 #: Jacobian, keep their frozen matrices; above it the dense LU grows like size^3, its matrices
 #: like size^2.

@@ -24,7 +24,7 @@ from ..engine.hb import HarmonicBalance, _breakpoint_key
 from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
 from ..engine.newton import newton
-from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis, mesh_period_rule
+from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -208,16 +208,13 @@ def _read_out_rule(breakpoints: tuple, harmonics: int, nu: int):
     nodes (cached per geometry): ``(base, s, w, basis)``, `basis` the trigonometric basis
     ``(cos, sin)`` or, from :data:`READ_OUT_LATTICE_HARMONICS` on, the lattice rule."""
     order = 2 * harmonics // nu + 8
-    if harmonics >= READ_OUT_LATTICE_HARMONICS:
-        basis = lattice_rule(np.asarray(breakpoints), order, coefficients=False)
-        s, w = basis.nodes, basis.weights
-    else:
-        s, w = (np.asarray(a) for a in mesh_period_rule(np.asarray(breakpoints), order))
+    lattice = lattice_rule(np.asarray(breakpoints), order, coefficients=False)
+    s, w = lattice.nodes, lattice.weights  # those of mesh_period_rule(breakpoints, order)
     base = np.concatenate([(j + s) / nu for j in range(nu)])
-    if harmonics < READ_OUT_LATTICE_HARMONICS:
-        tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
-        basis = np.cos(tau), np.sin(tau)
-    return base, np.tile(s, nu), np.tile(w, nu) / nu, basis
+    if harmonics >= READ_OUT_LATTICE_HARMONICS:
+        return base, np.tile(s, nu), np.tile(w, nu) / nu, lattice
+    tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+    return base, np.tile(s, nu), np.tile(w, nu) / nu, (np.cos(tau), np.sin(tau))
 
 
 def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
