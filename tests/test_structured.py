@@ -258,3 +258,16 @@ def test_hill_on_dense_path_is_unchanged_by_solution_multipliers():
     hb = HarmonicBalance(model.ndof, 16, 1, 72)
     np.testing.assert_array_equal(solution_multipliers(sol), hill_multipliers(hb, sol.z, sol.omega_pinion,
                                                                               GearSystem(model)))
+
+
+def test_starved_krylov_solves_end_in_a_convergence_error_not_a_wrong_answer(monkeypatch):
+    """With GMRES allowed one product per step the structured Newton cannot reach the tolerance:
+    solve_periodic raises ConvergenceError, naming the GMRES products, the residual reached."""
+    import hbgear.engine.structured as structured_module
+    from hbgear.errors import ConvergenceError
+
+    monkeypatch.setattr(hb_module, "STRUCTURED_MIN_SIZE", 0)
+    monkeypatch.setattr(structured_module, "MAX_PRODUCTS", 1)
+    with pytest.raises(ConvergenceError, match="GMRES products") as error:
+        solve_periodic(gear("NLTV"), rpm_to_rad_s(3000.0), harmonics=16, samples=72, max_iterations=5)
+    assert "residual" in str(error.value)

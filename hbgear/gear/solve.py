@@ -305,7 +305,8 @@ def solve_periodic(
     if model.is_linear:
         z = guess if z0 is None else np.asarray(z0)
         result = _newton(hb, system, omega, z, tolerance, 3)
-        tried.append("direct linear solve")
+        tried.append("direct linear solve" + (f" ({result.linear_iterations} GMRES products)"
+                                              if result.linear_iterations else ""))
     else:
         result = None
         if guess is not None:
