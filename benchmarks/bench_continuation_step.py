@@ -11,13 +11,16 @@ Two curves, each run once to compile and then ``--repeats`` times (median of ``t
 The residual functions are wrapped with call counters (the wrappers cost ~1 us per call); the
 same wrapped callables are passed to every run of a version (``jit_step`` then traces once, in
 the compiling run). The versions take turns within each round, since the machine's load drifts.
-``--baseline FILE`` also runs another version of ``hbgear/continuation.py`` (e.g. the previous
-one, ``git show HEAD:hbgear/continuation.py > /tmp/before.py``) on the same problems and
-compares its points with the current version's (max |z diff| over points, when the two runs
-store the same number of points). Variants of the current version: ``default``, ``chord``
-(``PseudoArclength(chord=True)``) and ``jit`` (``jit_step=True``) -- see ``--variants``.
+``--baseline PATH`` also runs another version of ``hbgear.engine.continuation`` on the same
+problems -- a single module file (the one before it became a package: ``git show
+32b9ddc:hbgear/engine/continuation.py > /tmp/before.py``) or a copy of the package's directory
+(``git archive REV hbgear/engine/continuation | tar -x -C /tmp/before``, then
+``/tmp/before/hbgear/engine/continuation``): each variant of it runs just before the same
+variant of the current version, and the two are compared (time ratio of the medians; max |z
+diff| over points, when the two runs store the same number of points). Variants: ``default``,
+``chord`` (``PseudoArclength(chord=True)``) and ``jit`` (``jit_step=True``) -- see ``--variants``.
 
-Run: ``python benchmarks/bench_continuation_step.py [--baseline FILE] [--repeats 3]``.
+Run: ``python benchmarks/bench_continuation_step.py [--baseline PATH] [--repeats 3]``.
 """
 
 from __future__ import annotations
@@ -38,7 +41,15 @@ CONFIG = ROOT / "examples" / "paper_table1.toml"
 
 
 def load_module(path):
-    spec = importlib.util.spec_from_file_location("hbgear._continuation_baseline", path)
+    """The module file or package directory at `path`, as a sibling of hbgear.engine.continuation
+    (so that its relative imports resolve to this checkout's engine)."""
+    path = Path(path)
+    name = "hbgear.engine._continuation_baseline"
+    if path.is_dir():
+        spec = importlib.util.spec_from_file_location(name, path / "__init__.py",
+                                                      submodule_search_locations=[str(path)])
+    else:
+        spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
@@ -151,40 +162,42 @@ VARIANTS = {"default": {}, "chord": {"chord": True}, "jit": {"jit_step": True}}
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--baseline", help="another continuation.py to run on the same problems")
+    parser.add_argument("--baseline", help="another continuation module file or package directory to run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--problems", default="duffing,gear")
     parser.add_argument("--variants", default="default,chord,jit")
     args = parser.parse_args(argv)
     import hbgear.engine.continuation as current
 
-    field_names = {f.name for f in dataclasses.fields(current.PseudoArclength)}
+    versions = [("", current)]
+    if args.baseline:  # each variant of the baseline runs just before the same variant of this version
+        versions.insert(0, ("baseline ", load_module(args.baseline)))
     runs = []
-    if args.baseline:
-        runs.append(("baseline", load_module(args.baseline), {}))
     for v in args.variants.split(","):
         kw = VARIANTS[v]
-        if set(kw) <= field_names:
-            runs.append((v, current, kw))
-        else:
-            print(f"(variant {v} not available in this version)")
+        for prefix, module in versions:
+            if set(kw) <= {f.name for f in dataclasses.fields(module.PseudoArclength)}:
+                runs.append((prefix + v, module, kw))
+            else:
+                print(f"(variant {v} not available in {prefix or 'this version'})")
     problems = {"duffing": duffing_problem, "gear": gear_problem}
     for key in args.problems.split(","):
         prob = problems[key]()
         print(f"\n== {prob['name']} (median of {args.repeats} runs after a compiling run)")
-        print(f"{'version':10s} {'points':>6s} {'ms/point':>9s} {'runs [s]':>22s} {'first [s]':>9s} {'(R,J,Jp)/pt':>11s} "
-              f"{'R/pt':>6s} {'iter/pt':>7s} {'rejected':>8s}")
+        print(f"{'version':17s} {'points':>6s} {'ms/point':>9s} {'runs [s]':>22s} {'first [s]':>9s} "
+              f"{'(R,J,Jp)/pt':>11s} {'R/pt':>6s} {'iter/pt':>7s} {'rejected':>8s}")
         results = measure(runs, prob, args.repeats)
         for label, res in results.items():
             runs_s = " ".join(f"{t:.2f}" for t in res["times"])
-            print(f"{label:10s} {res['points']:6d} {1e3 * res['median'] / res['points']:9.2f} {runs_s:>22s} "
+            print(f"{label:17s} {res['points']:6d} {1e3 * res['median'] / res['points']:9.2f} {runs_s:>22s} "
                   f"{res['first']:9.2f} {res['rj_per_point']:11.2f} {res['r_per_point']:6.2f} {res['iterations']:7.2f} "
                   f"{res['rejected']:8d}")
-        ref = results.get("baseline")
         for label, res in results.items():
-            if ref is not None and label != "baseline":
-                print(f"  {label} vs baseline: {compare(ref['branch'], res['branch'])}; "
-                      f"status {res['branch'].status.name}, folds at {np.round(res['branch'].fold_p, 9)}")
+            ref = results.get("baseline " + label)
+            if ref is not None:
+                print(f"  {label} vs baseline: time per run {res['median'] / ref['median']:.3f}x (medians); "
+                      f"{compare(ref['branch'], res['branch'])}; status {res['branch'].status.name}, "
+                      f"folds at {np.round(res['branch'].fold_p, 9)}")
     return 0
 
 

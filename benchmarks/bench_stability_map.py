@@ -32,19 +32,21 @@ CONFIG = ROOT / "examples" / "paper_table1.toml"
 
 def run(quick=False, repeats=None):
     from hbgear.config import load_config
-    from hbgear.gear.maps import stability_map, stability_map_ltv_a
+    from hbgear import stability_map
+    from hbgear.build import model_at_contact_ratio
+    from hbgear.gear.maps import stability_map_ltv_a
 
     repeats = repeats or (2 if quick else 5)
     cfg = load_config(CONFIG, [])
     speeds = np.linspace(20000.0, 32000.0, 100)
     ratios = np.linspace(1.35, 1.65, 50)
     a = time.perf_counter()
-    stability_map_ltv_a(cfg, speeds[:2], ratios[:2])
+    stability_map_ltv_a([model_at_contact_ratio(cfg, g) for g in ratios[:2]], speeds[:2])
     first = time.perf_counter() - a
     times = []
     for _ in range(repeats):
         a = time.perf_counter()
-        grid = stability_map_ltv_a(cfg, speeds, ratios)
+        grid = stability_map_ltv_a([model_at_contact_ratio(cfg, g) for g in ratios], speeds)
         times.append(time.perf_counter() - a)
     out = {"ltv_first_s": first, "ltv_map_s": statistics.median(times), "ltv_shape": grid.shape,
            "ltv_unstable_share": float(np.mean(grid > 1 + 1e-9)), "ltv_repeats": repeats}

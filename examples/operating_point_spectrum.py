@@ -15,14 +15,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hbgear.build import build_model
-from hbgear.config import load_config
-from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+import hbgear
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 4500.0
-cfg = load_config("examples/paper_table1.toml", ["friction.model='NLTV'", "boundary.damping_ratio=0.1"])
-model = build_model(cfg)
-sol = solve_periodic(model, rpm_to_rad_s(rpm), harmonics=cfg.solver.harmonics, samples=cfg.solver.time_samples)
+cfg = hbgear.load_config("examples/paper_table1.toml", ["friction.model='NLTV'", "boundary.damping_ratio=0.1"])
+model = hbgear.build_model(cfg)
+sol = hbgear.solve(model, speed_rpm=rpm, harmonics=cfg.solver.harmonics, samples=cfg.solver.time_samples)
 
 for key, value in sol.summary().items():
     print(f"{key:24s} {value:12.5g}")

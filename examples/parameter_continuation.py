@@ -19,27 +19,20 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hbgear.build import build_model
-from hbgear.engine.hb import residual_functions
-from hbgear.config import load_config
-from hbgear.engine.continuation import PseudoArclength, continuation
-from hbgear.engine.hb import HarmonicBalance
-from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
-from hbgear.gear.system import GearSystem
+import hbgear
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 12500.0
 t_start, t_stop = 400.0, 40.0  # pinion torque range [N m]
-model = build_model(load_config("examples/backlash.toml", ["mesh.backlash_um=5", "solver.harmonics=24", "solver.time_samples=512"]))
+model = hbgear.build_model(hbgear.load_config("examples/backlash.toml", ["mesh.backlash_um=5"]))
 model = model.replace(torque_pinion_Nm=t_start)
-omega = rpm_to_rad_s(rpm)
-start = solve_periodic(model, omega, harmonics=24, samples=512)
+start = hbgear.solve(model, speed_rpm=rpm, harmonics=24, samples=512, stability=False)  # the staged start
 
-hb = HarmonicBalance(model.ndof, 24, 1, 512)
-system = GearSystem(model, omega_pinion=omega, parameter="torque_pinion_Nm")
-residual_and_jacobians, residual, fixed = residual_functions(hb, system)
-branch = continuation(residual_and_jacobians, residual, start.z, t_start, t_stop,
-                      PseudoArclength(ds=0.02, ds_max=0.1), max_points=400, progress=True, args=fixed)
-print(f"{branch.status.name}: {len(branch)} points, folds at {np.round(branch.fold_p, 1)} N m")
+# the gear pair as a periodic system in another parameter: the same calls as for any system
+system = hbgear.GearSystem(model, omega_pinion=start.omega_pinion, parameter="torque_pinion_Nm")
+curve = hbgear.frequency_response(system, parameter=(t_start, t_stop), harmonics=24, samples=512, z0=start.z,
+                                  stability=False, progress=True)
+branch, hb = curve.branch, curve.hb
+print(f"{branch.status.name}: {len(branch)} points, folds at {np.round(curve.folds, 1)} N m")
 
 # DTE (coefficients z are in units of the start model's static deflection N/k_mean)
 scale = system.displacement_scale

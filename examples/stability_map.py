@@ -17,12 +17,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hbgear.config import load_config
-from hbgear.gear.maps import stability_map_ltv_a
+import hbgear
 
 cfg = load_config("examples/paper_table1.toml", ["boundary.output='torques'", "friction.model='LTV'"])
 speeds = np.linspace(20000.0, 32000.0, 121)  # [rpm]
 ratios = np.linspace(1.35, 1.65, 31)
-grid = stability_map_ltv_a(cfg, speeds, ratios)  # (ratios, speeds)
+grid = hbgear.stability_map(cfg, speeds, ratios)  # (ratios, speeds): exact monodromy for LTV-A
 print(f"unstable fraction of the grid: {np.mean(grid > 1):.3f}; largest |multiplier| {grid.max():.4f}")
 
 fig, ax = plt.subplots(figsize=(8, 4.5))

@@ -15,15 +15,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hbgear.build import build_model
-from hbgear.config import load_config
-from hbgear.gear.simulate import simulate
-from hbgear.gear.solve import rpm_to_rad_s
+import hbgear
 
 rpm = float(sys.argv[1]) if len(sys.argv) > 1 else 3000.0
 overrides = ["friction.model='NLTV'", "friction.formulation='B'", "boundary.damping_ratio=0.1"]
-model = build_model(load_config("examples/paper_table1.toml", overrides))
-res = simulate(model, rpm_to_rad_s(rpm), record_cycles=2, progress=True)
+model = hbgear.build_model(hbgear.load_config("examples/paper_table1.toml", overrides))
+res = hbgear.simulate(model, speed_rpm=rpm, progress=True)
 print(f"steady after {res.cycles} mesh cycles ({res.elapsed_s:.1f} s); summary:")
 for key, value in res.summary.items():
     print(f"  {key:24s} {value:12.5g}")

@@ -1,4 +1,6 @@
-"""Config -> physics: build a :class:`~hbgear.gear.model.GearPairModel` from a ``RunConfig``.
+"""Config -> physics: build a :class:`~hbgear.gear.model.GearPairModel` from a ``RunConfig``,
+and the tooth-contact objects (geometry, pair stiffness, profile modification) of MODEL.md
+section 9 with :func:`build_tooth_contact`.
 
 Checks that need the physics (geometry, model combinations) raise
 :class:`~hbgear.errors.ConfigError` naming the key, like the config loader does.
@@ -6,29 +8,95 @@ Checks that need the physics (geometry, model combinations) raise
 
 from __future__ import annotations
 
+import math
+from typing import Any, NamedTuple
+
 import numpy as np
 
 from .errors import ConfigError
-from .gear.friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
+from .gear.contact import (
+    Iso6336PairStiffness,
+    Iso6336Stiffness,
+    ProfileModification,
+    RectangularMeshStiffness,
+    load_pair_stiffness_table,
+    potential_energy_pair_stiffness,
+    profile_modification,
+)
 from .gear.geometry import GearPair
-from .gear.model import GearPairModel
 
-__all__ = ["build_geometry", "build_model", "friction_law"]
+__all__ = ["ToothContact", "build_geometry", "build_model", "build_pair_stiffness", "build_tooth_contact",
+           "check_config", "friction_law", "model_at_contact_ratio"]
+
+#: A working centre distance may sit this far [m] below the zero-backlash one (printed rounding).
+CENTER_DISTANCE_ROUNDING_M = 0.5e-6
+
+#: ``h_f = r_f / r_int`` range of Sainsot, Velex & Duverger's fillet-foundation fit.
+FILLET_FIT_RANGE = (1.4, 7.0)
 
 
 def build_geometry(gear, contact_ratio: float | None = None) -> GearPair:
-    """``GearPair`` from ``[gear]``; `contact_ratio` overrides the config (maps, continuation)."""
+    """``GearPair`` from ``[gear]``; `contact_ratio` overrides the config (maps, continuation).
+
+    Unshifted pairs: exactly as before (the common addendum solved for a contact ratio, or
+    given). Profile-shifted pairs: the given addendum, the shifts, the working centre distance
+    (zero-backlash, or imposed and then not below it) and optional tip shortening (not where it
+    would lengthen the tips); their contact ratio must lie in (1, 2).
+    """
     target = contact_ratio if contact_ratio is not None else gear.contact_ratio
     if target is not None:
+        if gear.shifted:  # the config rejects contact_ratio with shift; this is a map's override
+            raise ConfigError("gear.profile_shift_pinion", gear.profile_shift_pinion,
+                              "0 where the contact ratio is varied (the addendum is solved for unshifted pairs only)")
         return GearPair.with_contact_ratio(
             gear.teeth_pinion, gear.teeth_gear, gear.module_m, gear.pressure_angle_rad, float(target)
         )
     ha = 1.0 if gear.addendum_coefficient is None else gear.addendum_coefficient
-    return GearPair(gear.teeth_pinion, gear.teeth_gear, gear.module_m, gear.pressure_angle_rad, ha).check()
+    if not gear.shifted:
+        return GearPair(gear.teeth_pinion, gear.teeth_gear, gear.module_m, gear.pressure_angle_rad, ha).check()
+    pair = GearPair(gear.teeth_pinion, gear.teeth_gear, gear.module_m, gear.pressure_angle_rad, ha,
+                    gear.profile_shift_pinion, gear.profile_shift_gear, gear.working_center_distance_m,
+                    gear.tip_shortening)
+    _check_shifted(gear, pair)
+    try:
+        return pair.check()
+    except ConfigError:
+        raise ConfigError("gear.profile_shift_pinion", gear.profile_shift_pinion,
+                          f"with profile_shift_gear = {gear.profile_shift_gear:g} and addendum_coefficient = {ha:g}, "
+                          f"a shift giving {_invalid_geometry(pair)}") from None
+
+
+def _invalid_geometry(pair: GearPair) -> str:
+    """What :meth:`GearPair.check` found wrong with `pair`, in words."""
+    if pair.tip_radius_pinion_m <= pair.base_radius_pinion_m or pair.tip_radius_gear_m <= pair.base_radius_gear_m:
+        return "tips beyond the base circles"
+    if pair.contact_start_m < 0 or pair.contact_end_m > pair.line_of_action_m:
+        return ("contact inside the line of action (a tip reaches past the other gear's base-circle tangency: "
+                f"x_A = {pair.contact_start_m * 1e3:.3f} mm, x_E = {pair.contact_end_m * 1e3:.3f} mm, "
+                f"L = {pair.line_of_action_m * 1e3:.3f} mm)")
+    return f"a contact ratio in (1, 2) (gives {pair.contact_ratio:.4f})"
+
+
+def _check_shifted(gear, pair: GearPair) -> None:
+    """An imposed ``a_w`` not below the zero-backlash one; tip shortening ``k = x1 + x2 - y >= 0``."""
+    if gear.working_center_distance_m is not None:
+        zero_backlash = GearPair(pair.teeth_pinion, pair.teeth_gear, pair.module_m, pair.pressure_angle_rad,
+                                 pair.addendum_coefficient, pair.profile_shift_pinion,
+                                 pair.profile_shift_gear).center_distance_m
+        if gear.working_center_distance_m < zero_backlash - CENTER_DISTANCE_ROUNDING_M:
+            raise ConfigError("gear.center_distance_mm", gear.working_center_distance_m * 1e3,
+                              f"a working centre distance >= {zero_backlash * 1e3:.4f} mm, the zero-backlash distance "
+                              "of these profile shifts (a smaller one makes the teeth interfere)")
+    if gear.tip_shortening and pair.tip_shortening_coefficient < 0.0:
+        raise ConfigError("gear.tip_shortening", True,
+                          f"false here: x1 + x2 - y = {pair.tip_shortening_coefficient:.4f} < 0 would lengthen the "
+                          "tips")
 
 
 def friction_law(friction):
     """The friction law object of ``[friction]``."""
+    from .gear.friction import LAWS, Arctan, Coulomb, KelleyLemanski, NoFriction
+
     if friction.law == "none" or friction.mu0 == 0.0 and friction.law in ("coulomb", "arctan"):
         return NoFriction()
     if friction.law == "coulomb":
@@ -36,41 +104,49 @@ def friction_law(friction):
     if friction.law == "arctan":
         return Arctan(friction.mu0, friction.v0_m_per_s)
     if friction.law == "kelley-lemanski":
-        if friction.roughness_um >= 1.27:
-            raise ConfigError("friction.roughness_um", friction.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
         return KelleyLemanski(friction.viscosity_Pa_s, friction.roughness_um)
     raise ConfigError("friction.law", friction.law, f"one of {sorted(LAWS)}")
 
 
-def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
-    """The gear-pair model of a run config (SI throughout)."""
-    geometry = build_geometry(cfg.gear, contact_ratio)
+def _k_min(cfg, geometry: GearPair, contact_ratio: float | None = None) -> float:
+    """``k_min`` [N/m] of the rectangular model: given, or from ``k_mean`` at the configured Gamma."""
     mesh = cfg.mesh
-    gamma = geometry.contact_ratio
     if mesh.k_min_N_per_m is not None:
-        k_min = mesh.k_min_N_per_m
-    else:
-        # k_mean = k_max (Gamma-1) + k_min (2-Gamma) at the CONFIGURED contact ratio -> k_min;
-        # k_max and k_min belong to the teeth and are held when the contact ratio is varied
-        gamma_config = geometry.contact_ratio if contact_ratio is None else build_geometry(cfg.gear).contact_ratio
-        k_min = (mesh.k_mean_N_per_m - mesh.k_max_N_per_m * (gamma_config - 1.0)) / (2.0 - gamma_config)
-        if not (0.0 < k_min <= mesh.k_max_N_per_m):
-            raise ConfigError(
-                "mesh.k_mean_MN_per_m",
-                mesh.k_mean_N_per_m / 1e6,
-                f"a mean stiffness giving 0 < k_min <= k_max at contact ratio {gamma:.4f}",
-            )
-    law = friction_law(cfg.friction)
-    fr = cfg.friction
-    if fr.model == "NLTV" and law.discontinuous:
-        # sgn(Vs) of the instantaneous sliding velocity is regularised (documented, shared by HB
-        # and time integration): (2/pi) atan(Vs / v_reg)
-        law = law.regularized(fr.regularization_m_per_s)
+        return mesh.k_min_N_per_m
+    # k_mean = k_max (Gamma-1) + k_min (2-Gamma) at the CONFIGURED contact ratio -> k_min;
+    # k_max and k_min belong to the teeth and are held when the contact ratio is varied
+    gamma_config = geometry.contact_ratio if contact_ratio is None else build_geometry(cfg.gear).contact_ratio
+    k_min = (mesh.k_mean_N_per_m - mesh.k_max_N_per_m * (gamma_config - 1.0)) / (2.0 - gamma_config)
+    if not (0.0 < k_min <= mesh.k_max_N_per_m):
+        raise ConfigError(
+            "mesh.k_mean_MN_per_m",
+            mesh.k_mean_N_per_m / 1e6,
+            f"a mean stiffness giving 0 < k_min <= k_max at contact ratio {geometry.contact_ratio:.4f}",
+        )
+    return k_min
+
+
+def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, float]:
+    """The physics checks of a run config for the dynamic model that need the geometry but no JAX
+    (so a bad input ends at once, before anything heavy is imported): the contact ratio in (1, 2),
+    a mean stiffness giving ``0 < k_min <= k_max``, the stiffness model, the
+    coupling/formulation/boundary/backlash combinations, the Kelley-Lemanski roughness limit.
+
+    **Returns:** ``(geometry, k_min [N/m])``. **Raises:** :class:`~hbgear.errors.ConfigError`.
+    """
+    mesh, fr = cfg.mesh, cfg.friction
+    if mesh.stiffness_model != "rectangular":
+        raise ConfigError("mesh.stiffness_model", mesh.stiffness_model,
+                          "'rectangular' for the dynamic commands: per-pair contact is not in the dynamic model yet "
+                          "(hbgear static-te takes every model)")
+    geometry = build_geometry(cfg.gear, contact_ratio)
+    k_min = _k_min(cfg, geometry, contact_ratio)
+    if fr.law == "kelley-lemanski" and fr.roughness_um >= 1.27:
+        raise ConfigError("friction.roughness_um", fr.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
-    contact = "backlash" if mesh.backlash_m > 0 else "linear"
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
-    if coupling == "LTI" and contact == "backlash":
+    if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
     if coupling == "NLTV" and boundary == "torques":
         raise ConfigError(
@@ -79,6 +155,23 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
             "'spring' or 'reaction' with model 'NLTV' (friction needs both gear speeds; with constant "
             "torques only the DTE is periodic)",
         )
+    return geometry, k_min
+
+
+def build_model(cfg, contact_ratio: float | None = None):
+    """The gear-pair model of a run config (SI throughout); :func:`check_config` first."""
+    from .gear.model import GearPairModel
+
+    geometry, k_min = check_config(cfg, contact_ratio)
+    mesh, fr = cfg.mesh, cfg.friction
+    gamma = geometry.contact_ratio
+    law = friction_law(fr)
+    if fr.model == "NLTV" and law.discontinuous:
+        # sgn(Vs) of the instantaneous sliding velocity is regularised (documented, shared by HB
+        # and time integration): (2/pi) atan(Vs / v_reg)
+        law = law.regularized(fr.regularization_m_per_s)
+    coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
+    contact = "backlash" if mesh.backlash_m > 0 else "linear"
     return GearPairModel(
         teeth_pinion=float(geometry.teeth_pinion),
         teeth_gear=float(geometry.teeth_gear),
@@ -107,3 +200,105 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
         damping_model=mesh.damping_model,
         contact=contact,
     )
+
+
+def model_at_contact_ratio(cfg, contact_ratio: float):
+    """The config's model at another contact ratio: ``k_max``, ``k_min`` held (they belong to the
+    teeth), ``k_mean`` follows (MODEL.md section 2)."""
+    return build_model(cfg, contact_ratio=float(contact_ratio))
+
+
+class ToothContact(NamedTuple):
+    """The tooth-contact objects of a config (MODEL.md section 9), SI.
+
+    **Fields:** `geometry` (:class:`GearPair`); `pair_stiffness` (a single-pair model with
+    ``stiffness(xi, xp)``, or :class:`RectangularMeshStiffness` for "rectangular"); `modification`
+    (:class:`ProfileModification`, zero without [profile] relief); `iso6336` (the ISO 6336 numbers,
+    for "iso6336" only, else `None`); `torque_pinion_Nm` (the torque the stiffness was built for).
+    """
+
+    geometry: GearPair
+    pair_stiffness: Any
+    modification: ProfileModification
+    iso6336: Iso6336Stiffness | None
+    torque_pinion_Nm: float
+
+
+def build_tooth_contact(cfg, torque_pinion_Nm: float | None = None, geometry: GearPair | None = None) -> ToothContact:
+    """Geometry, pair stiffness and profile modification of a config, every input checked.
+
+    `torque_pinion_Nm` (default ``[load] torque_pinion_Nm``) matters only for ISO 6336's low
+    line-load factor; `geometry` reuses an already built :func:`build_geometry`.
+
+    **Raises:** :class:`~hbgear.errors.ConfigError` naming the key (a bad table, a relief
+    longer than the path of contact, a bore outside the fillet fit, ...).
+    """
+    torque = cfg.load.torque_pinion_Nm if torque_pinion_Nm is None else float(torque_pinion_Nm)
+    geometry = build_geometry(cfg.gear) if geometry is None else geometry
+    stiffness, numbers = build_pair_stiffness(cfg, geometry, torque)
+    modification = profile_modification(geometry, **cfg.profile.to_keys())
+    return ToothContact(geometry, stiffness, modification, numbers, torque)
+
+
+def build_pair_stiffness(cfg, geometry: GearPair, torque_pinion_Nm: float) -> tuple[Any, Iso6336Stiffness | None]:
+    """The pair stiffness of ``[mesh] stiffness_model`` and, for "iso6336", its ISO numbers.
+
+    - "rectangular": ``k_max`` and ``k_min`` (:class:`RectangularMeshStiffness`).
+    - "pair_table": the CSV of ``mesh.pair_stiffness_file`` (checked by its loader).
+    - "iso6336": ``c'`` and ``c_gamma_alpha`` of the pair (same modulus and rack on both gears) at
+      the line load ``w = F_t / b``, ``F_t = T_p / r_p`` (application factor ``K_A = 1``: the
+      torque analysed), spread by the documented parabola.
+    - "potential_energy": from the tooth geometry, the material and the bores.
+    """
+    mesh, b = cfg.mesh, cfg.gear.face_width_m
+    model = mesh.stiffness_model
+    if model == "rectangular":
+        return RectangularMeshStiffness(mesh.k_max_N_per_m, _k_min(cfg, geometry)), None
+    if model == "pair_table":
+        return load_pair_stiffness_table(mesh.pair_stiffness_file, geometry), None
+    if model == "iso6336":
+        line_load = torque_pinion_Nm / geometry.pitch_radius_pinion_m / (b * 1e3)
+        return Iso6336PairStiffness.from_geometry(
+            geometry, b, rack_dedendum_coefficient=(mesh.rack_dedendum_coefficient,) * 2,
+            blank_factor=mesh.blank_factor, youngs_modulus_Pa=(mesh.youngs_modulus_Pa,) * 2,
+            line_load_N_per_mm=line_load)
+    bores = _potential_energy_bores(cfg, geometry)
+    return potential_energy_pair_stiffness(
+        geometry, b, mesh.youngs_modulus_Pa, mesh.poisson_ratio, bores,
+        rack_dedendum_coefficient=mesh.rack_dedendum_coefficient,
+        rack_tip_radius_coefficient=mesh.rack_tip_radius_coefficient), None
+
+
+def _potential_energy_bores(cfg, geometry: GearPair) -> tuple[float, float]:
+    """Bore radii ``(r_int,p, r_int,g)`` [m], after checking what the potential-energy model assumes.
+
+    The basic rack keeps a tip flat (``e = m [pi/4 - h tan(phi) - rho (1 - sin phi)/cos phi] > 0``);
+    each root circle ``r_f = m (z/2 - h + x)`` lies inside the base circle (the Yang-Lin tooth
+    starts there); ``h_f = r_f / r_int`` is inside :data:`FILLET_FIT_RANGE`.
+    """
+    mesh, phi = cfg.mesh, geometry.pressure_angle_rad
+    h, rho = mesh.rack_dedendum_coefficient, mesh.rack_tip_radius_coefficient
+    rho_max = (math.pi / 4 - h * math.tan(phi)) * math.cos(phi) / (1 - math.sin(phi))
+    if rho >= rho_max:
+        raise ConfigError("mesh.rack_tip_radius_coefficient", rho,
+                          f"a value < {rho_max:.4f} with rack_dedendum_coefficient = {h:g} (the rack needs a tip flat)")
+    bores = []
+    for end, teeth, shift, base in (
+        ("pinion", geometry.teeth_pinion, geometry.profile_shift_pinion, geometry.base_radius_pinion_m),
+        ("gear", geometry.teeth_gear, geometry.profile_shift_gear, geometry.base_radius_gear_m),
+    ):
+        root = geometry.module_m * (teeth / 2 - h + shift)
+        if root >= base:
+            raise ConfigError("mesh.stiffness_model", "potential_energy",
+                              f"a pair whose root circles lie inside their base circles (the {end}'s root diameter "
+                              f"{2e3 * root:.3f} mm >= base diameter {2e3 * base:.3f} mm; the Yang-Lin tooth starts at "
+                              "the base circle): use 'iso6336' or 'pair_table'")
+        bore = getattr(cfg.gear, f"bore_diameter_{end}_m") / 2
+        lo, hi = FILLET_FIT_RANGE
+        if not lo <= root / bore <= hi:
+            raise ConfigError(f"gear.bore_diameter_{end}_mm", 2e3 * bore,
+                              f"a bore diameter in [{2e3 * root / hi:.3f}, {2e3 * root / lo:.3f}] mm (root radius / "
+                              f"bore radius in [{lo:g}, {hi:g}], the range of the fillet-foundation fit; root diameter "
+                              f"{2e3 * root:.3f} mm)")
+        bores.append(bore)
+    return bores[0], bores[1]

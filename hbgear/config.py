@@ -9,7 +9,8 @@ integer is required; a boolean is never a number), that it is finite, its range,
 names, mutually exclusive keys, and unknown sections or keys (the message lists the allowed
 ones). Any problem raises :class:`hbgear.errors.ConfigError` with the dotted key, the value
 given and what is allowed. Checks that need the gear geometry (e.g. the contact ratio that an
-`addendum_coefficient` produces) belong to the physics code.
+`addendum_coefficient` produces, a relief length against the path of contact, the contents of
+`mesh.pair_stiffness_file`) belong to the physics code (:mod:`hbgear.build`).
 
 **Public API:** :func:`load_config`, :func:`parse_config`, :func:`apply_overrides`,
 :class:`RunConfig` (with :meth:`RunConfig.to_dict`) and the section dataclasses.
@@ -37,6 +38,7 @@ __all__ = [
     "LoadConfig",
     "MapConfig",
     "MeshConfig",
+    "ProfileConfig",
     "RunConfig",
     "SimulateConfig",
     "SolverConfig",
@@ -56,6 +58,17 @@ FRICTION_FORMULATIONS = ("A", "B")
 FRICTION_MODELS = ("LTI", "LTV", "NLTV")
 DAMPING_MODELS = ("constant", "proportional")
 BOUNDARY_OUTPUTS = ("torques", "spring", "reaction")
+STIFFNESS_MODELS = ("rectangular", "pair_table", "iso6336", "potential_energy")
+PROFILE_SHAPES = ("linear", "parabolic")
+
+#: The [mesh] stiffness keys each `stiffness_model` takes (any other one of them is an error).
+MODEL_KEYS = {
+    "rectangular": ("k_max_MN_per_m", "k_mean_MN_per_m", "k_min_MN_per_m"),
+    "pair_table": ("pair_stiffness_file",),
+    "iso6336": ("youngs_modulus_GPa", "rack_dedendum_coefficient", "blank_factor"),
+    "potential_energy": ("youngs_modulus_GPa", "poisson_ratio", "rack_dedendum_coefficient",
+                         "rack_tip_radius_coefficient"),
+}
 
 
 # ----------------------------------------------------------------------------- dataclasses
@@ -68,7 +81,14 @@ class GearConfig:
     **Fields:** `teeth_pinion`, `teeth_gear` [-]; `module_m` [m]; `pressure_angle_rad` [rad];
     `contact_ratio` [-] (target profile contact ratio, or `None`) XOR `addendum_coefficient`
     [-] (same on both gears; 1.0 when neither is given); `face_width_m` [m];
-    `inertia_pinion_kgm2`, `inertia_gear_kgm2` [kg m^2].
+    `inertia_pinion_kgm2`, `inertia_gear_kgm2` [kg m^2]; `profile_shift_pinion`,
+    `profile_shift_gear` [-] (``x_1``, ``x_2``); `working_center_distance_m` [m] (an imposed
+    ``a_w`` of a profile-shifted pair, or `None` for its zero-backlash distance);
+    `tip_shortening` (shorten both tips by ``(x_1 + x_2 - y) m``); `bore_diameter_pinion_m`,
+    `bore_diameter_gear_m` [m] (the blanks' bores, for the potential-energy stiffness).
+
+    The common addendum is solved for `contact_ratio` only for unshifted pairs at the reference
+    centre distance, so `contact_ratio` excludes profile shift.
     """
 
     teeth_pinion: int
@@ -80,8 +100,33 @@ class GearConfig:
     face_width_m: float = 0.020
     inertia_pinion_kgm2: float
     inertia_gear_kgm2: float
+    profile_shift_pinion: float = 0.0
+    profile_shift_gear: float = 0.0
+    working_center_distance_m: float | None = None
+    tip_shortening: bool = False
+    bore_diameter_pinion_m: float | None = None
+    bore_diameter_gear_m: float | None = None
+
+    @property
+    def shifted(self) -> bool:
+        """Whether either gear is profile-shifted."""
+        return self.profile_shift_pinion != 0.0 or self.profile_shift_gear != 0.0
 
     def __post_init__(self):
+        if self.shifted and self.contact_ratio is not None:
+            raise ConfigError(
+                "gear.contact_ratio",
+                self.contact_ratio,
+                "not with profile shift: give gear.addendum_coefficient (the contact ratio follows from the "
+                "shifted geometry)",
+            )
+        if self.working_center_distance_m is not None and not self.shifted:
+            raise ConfigError(
+                "gear.center_distance_mm",
+                self.working_center_distance_m * 1e3,
+                "give gear.module_mm or gear.center_distance_mm, not both (both only for a profile-shifted "
+                "pair, where center_distance_mm is the working centre distance)",
+            )
         if self.contact_ratio is not None and self.addendum_coefficient is not None:
             raise ConfigError(
                 "gear.addendum_coefficient",
@@ -96,15 +141,29 @@ class GearConfig:
 class MeshConfig:
     """Mesh stiffness, damping, backlash and unloaded static transmission error.
 
-    **Fields:** `k_max_N_per_m` [N/m] (two pairs in contact); `k_mean_N_per_m` XOR
-    `k_min_N_per_m` [N/m] (the other follows from the contact ratio); `damping_ratio` [-];
-    `damping_model` ("constant" or "proportional" to k(t)); `backlash_m` [m] (total);
-    `ste_amplitude_m` [m] and `ste_phase_rad` [rad], one entry per mesh order 1, 2, ...
+    **Fields:** `stiffness_model` (:data:`STIFFNESS_MODELS`); for "rectangular" (the paper's
+    ``k(t)``): `k_max_N_per_m` [N/m] (two pairs in contact) and `k_mean_N_per_m` XOR
+    `k_min_N_per_m` [N/m] (the other follows from the contact ratio); for "pair_table":
+    `pair_stiffness_file` (a CSV of single-pair stiffness along the path); for "iso6336" and
+    "potential_energy": `youngs_modulus_Pa` [Pa] (both gears), `rack_dedendum_coefficient`
+    ``h_fP/m`` [-] of the basic rack, and `blank_factor` ``C_R`` [-] (iso6336), or
+    `poisson_ratio` [-] and `rack_tip_radius_coefficient` ``rho_fP/m`` [-] (potential_energy);
+    `damping_ratio` [-]; `damping_model` ("constant" or "proportional" to k(t)); `backlash_m`
+    [m] (total); `ste_amplitude_m` [m] and `ste_phase_rad` [rad], one entry per mesh order 1, 2.
+    Defaults of the material and rack: steel (206 GPa, 0.3) and the ISO 53 profile A rack
+    (``h_fP = 1.25 m``, ``rho_fP = 0.38 m``); solid blanks (``C_R = 1``).
     """
 
-    k_max_N_per_m: float
+    stiffness_model: str = "rectangular"
+    k_max_N_per_m: float | None = None
     k_mean_N_per_m: float | None = None
     k_min_N_per_m: float | None = None
+    pair_stiffness_file: Path | None = None
+    youngs_modulus_Pa: float = 206e9
+    poisson_ratio: float = 0.3
+    rack_dedendum_coefficient: float = 1.25
+    rack_tip_radius_coefficient: float = 0.38
+    blank_factor: float = 1.0
     damping_ratio: float = 0.01
     damping_model: str = "constant"
     backlash_m: float = 0.0
@@ -112,18 +171,34 @@ class MeshConfig:
     ste_phase_rad: tuple[float, ...] = ()
 
     def __post_init__(self):
-        if (self.k_mean_N_per_m is None) == (self.k_min_N_per_m is None):
-            raise ConfigError(
-                "mesh.k_mean_MN_per_m",
-                self.k_mean_N_per_m,
-                "give exactly one of mesh.k_mean_MN_per_m and mesh.k_min_MN_per_m",
-            )
+        if self.stiffness_model not in STIFFNESS_MODELS:
+            raise ConfigError("mesh.stiffness_model", self.stiffness_model,
+                              "one of " + ", ".join(repr(m) for m in STIFFNESS_MODELS))
         if len(self.ste_phase_rad) != len(self.ste_amplitude_m):
             raise ConfigError(
                 "mesh.ste_phase_deg",
                 list(self.ste_phase_rad),
                 "a list of the same length as mesh.ste_amplitude_um "
                 f"({len(self.ste_amplitude_m)})",
+            )
+        model = self.stiffness_model
+        stiffnesses = {"k_max_MN_per_m": self.k_max_N_per_m, "k_mean_MN_per_m": self.k_mean_N_per_m,
+                       "k_min_MN_per_m": self.k_min_N_per_m, "pair_stiffness_file": self.pair_stiffness_file}
+        for name, value in stiffnesses.items():
+            if value is not None and name not in MODEL_KEYS[model]:
+                raise _inapplicable(f"mesh.{name}", value if name == "pair_stiffness_file" else value * 1e-6, model)
+        if model == "pair_table" and self.pair_stiffness_file is None:
+            raise ConfigError("mesh.pair_stiffness_file", _MISSING, "required with mesh.stiffness_model = 'pair_table'")
+        if model != "rectangular":
+            return
+        if self.k_max_N_per_m is None:
+            raise ConfigError("mesh.k_max_MN_per_m", _MISSING,
+                              "required with mesh.stiffness_model = 'rectangular' (the default)")
+        if (self.k_mean_N_per_m is None) == (self.k_min_N_per_m is None):
+            raise ConfigError(
+                "mesh.k_mean_MN_per_m",
+                self.k_mean_N_per_m,
+                "give exactly one of mesh.k_mean_MN_per_m and mesh.k_min_MN_per_m",
             )
 
 
@@ -132,6 +207,51 @@ class LoadConfig:
     """Static load. **Fields:** `torque_pinion_Nm` [N m], input torque on the pinion."""
 
     torque_pinion_Nm: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProfileConfig:
+    """Tip and root relief of both flanks, along the line of action (MODEL.md section 9).
+
+    **Fields:** `<flank>_<end>_relief_m` [m] (amount, material removed) and
+    `<flank>_<end>_relief_length_m` [m] (from that end of the flank's active profile), for
+    flank pinion | gear and end tip | root; `shape` ("linear" or "parabolic"). A relief amount
+    needs a length > 0. The lengths are checked against the path of contact when the geometry
+    is built (:func:`hbgear.gear.contact.profile_modification`).
+    """
+
+    pinion_tip_relief_m: float = 0.0
+    pinion_tip_relief_length_m: float = 0.0
+    gear_tip_relief_m: float = 0.0
+    gear_tip_relief_length_m: float = 0.0
+    pinion_root_relief_m: float = 0.0
+    pinion_root_relief_length_m: float = 0.0
+    gear_root_relief_m: float = 0.0
+    gear_root_relief_length_m: float = 0.0
+    shape: str = "linear"
+
+    def __post_init__(self):
+        for name in _RELIEFS:
+            amount, length = getattr(self, f"{name}_m"), getattr(self, f"{name}_length_m")
+            if amount > 0.0 and length == 0.0:
+                raise ConfigError(f"profile.{name}_length_mm", 0.0,
+                                  f"a length > 0 where profile.{name}_um = {amount * 1e6:g} > 0")
+
+    @property
+    def relieved(self) -> tuple[str, ...]:
+        """The TOML keys of the non-zero relief amounts."""
+        return tuple(f"{name}_um" for name in _RELIEFS if getattr(self, f"{name}_m") > 0.0)
+
+    def to_keys(self) -> dict[str, Any]:
+        """The [profile] table in its TOML keys and units (what ``profile_modification`` takes)."""
+        keys: dict[str, Any] = {}
+        for name in _RELIEFS:
+            keys[f"{name}_um"] = getattr(self, f"{name}_m") * 1e6
+            keys[f"{name}_length_mm"] = getattr(self, f"{name}_length_m") * 1e3
+        return keys | {"shape": self.shape}
+
+
+_RELIEFS = tuple(f"{flank}_{end}_relief" for end in ("tip", "root") for flank in ("pinion", "gear"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -219,7 +339,8 @@ class SweepConfig:
     **Fields:** `speed_rpm_start`, `speed_rpm_stop` [rpm] (either may be larger);
     `max_points` [-]; `step_rpm` [rpm] (initial continuation step, or `None` for automatic);
     `period_doubling`: follow the nu = 2 branch at each period doubling -- ``True``, ``False`` or
-    ``None`` for "auto" (only where the nu = 2 problem is small; crossings are always located).
+    ``None`` for "auto" (only where the nu = 2 problem is small; crossings are always located);
+    `orders`: mesh orders 1..K in orders.csv (`None`: min(H / nu, 10)).
     """
 
     speed_rpm_start: float = 1000.0
@@ -227,6 +348,7 @@ class SweepConfig:
     max_points: int = 4000
     step_rpm: float | None = None
     period_doubling: bool | None = None
+    orders: int | None = None
 
     def __post_init__(self):
         if self.speed_rpm_start == self.speed_rpm_stop:
@@ -262,12 +384,29 @@ class RunConfig:
     gear: GearConfig
     mesh: MeshConfig
     load: LoadConfig
+    profile: ProfileConfig = field(default_factory=ProfileConfig)
     friction: FrictionConfig = field(default_factory=FrictionConfig)
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     simulate: SimulateConfig = field(default_factory=SimulateConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
     map: MapConfig = field(default_factory=MapConfig)
+
+    def __post_init__(self):
+        model = self.mesh.stiffness_model
+        for end in ("pinion", "gear"):
+            bore = getattr(self.gear, f"bore_diameter_{end}_m")
+            if bore is not None and model != "potential_energy":
+                raise _inapplicable(f"gear.bore_diameter_{end}_mm", bore * 1e3, model)
+            if bore is None and model == "potential_energy":
+                raise ConfigError(f"gear.bore_diameter_{end}_mm", _MISSING,
+                                  "required with mesh.stiffness_model = 'potential_energy' (the blank is clamped "
+                                  "at its bore)")
+        if model == "rectangular" and self.profile.relieved:
+            key = self.profile.relieved[0]
+            raise ConfigError(f"profile.{key}", getattr(self.profile, key.removesuffix("_um") + "_m") * 1e6,
+                              "0 with mesh.stiffness_model = 'rectangular' (a mesh-level k(t); relief needs a "
+                              "per-pair model: 'pair_table', 'iso6336' or 'potential_energy')")
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         """The configuration in the TOML keys and units (for provenance in output JSON).
@@ -290,12 +429,28 @@ class RunConfig:
             "face_width_mm": g.face_width_m * 1e3,
             "inertia_pinion_kgm2": g.inertia_pinion_kgm2,
             "inertia_gear_kgm2": g.inertia_gear_kgm2,
+            "profile_shift_pinion": g.profile_shift_pinion,
+            "profile_shift_gear": g.profile_shift_gear,
+            "tip_shortening": g.tip_shortening,
         }
-        mesh: dict[str, Any] = {"k_max_MN_per_m": m.k_max_N_per_m * 1e-6}
-        if m.k_mean_N_per_m is not None:
-            mesh["k_mean_MN_per_m"] = m.k_mean_N_per_m * 1e-6
-        else:
-            mesh["k_min_MN_per_m"] = m.k_min_N_per_m * 1e-6
+        for key, value in (("center_distance_mm", g.working_center_distance_m),
+                           ("bore_diameter_pinion_mm", g.bore_diameter_pinion_m),
+                           ("bore_diameter_gear_mm", g.bore_diameter_gear_m)):
+            if value is not None:
+                gear[key] = value * 1e3
+        mesh: dict[str, Any] = {"stiffness_model": m.stiffness_model}
+        material = {
+            "k_max_MN_per_m": None if m.k_max_N_per_m is None else m.k_max_N_per_m * 1e-6,
+            "k_mean_MN_per_m": None if m.k_mean_N_per_m is None else m.k_mean_N_per_m * 1e-6,
+            "k_min_MN_per_m": None if m.k_min_N_per_m is None else m.k_min_N_per_m * 1e-6,
+            "pair_stiffness_file": None if m.pair_stiffness_file is None else str(m.pair_stiffness_file),
+            "youngs_modulus_GPa": m.youngs_modulus_Pa * 1e-9,
+            "poisson_ratio": m.poisson_ratio,
+            "rack_dedendum_coefficient": m.rack_dedendum_coefficient,
+            "rack_tip_radius_coefficient": m.rack_tip_radius_coefficient,
+            "blank_factor": m.blank_factor,
+        }
+        mesh |= {k: material[k] for k in MODEL_KEYS[m.stiffness_model] if material[k] is not None}
         mesh |= {
             "damping_ratio": m.damping_ratio,
             "damping_model": m.damping_model,
@@ -308,6 +463,7 @@ class RunConfig:
             "gear": gear,
             "mesh": mesh,
             "load": {"torque_pinion_Nm": self.load.torque_pinion_Nm},
+            "profile": self.profile.to_keys(),
             "friction": dataclasses.asdict(fr),
             "boundary": dataclasses.asdict(self.boundary),
             "solver": {
@@ -390,6 +546,11 @@ def _choice(key, value, choices, *, fold=str.lower):
             if fold(value.strip()) == fold(choice):
                 return choice
     raise ConfigError(key, value, allowed)
+
+
+def _inapplicable(key: str, value: object, model: str) -> ConfigError:
+    """A key given for a stiffness model that does not use it."""
+    return ConfigError(key, value, f"not used by mesh.stiffness_model = {model!r} (remove it)")
 
 
 def _si(key, value, number, scale):
@@ -518,6 +679,18 @@ def _bool_or_auto(key: str, value: object) -> bool | None:
     raise ConfigError(key, value, 'true, false or "auto"')
 
 
+def _boolean(key: str, value: object) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(key, value, "true or false")
+    return value
+
+
+def _file(key: str, value: object) -> Path:
+    if not isinstance(value, str) or not value.strip() or "\x00" in value:
+        raise ConfigError(key, value, "a file name (a path relative to the config file's directory, or absolute)")
+    return Path(value.strip())
+
+
 def _address(key: str, value: object) -> str:
     if not isinstance(value, str) or not value.strip():
         raise ConfigError(key, value, 'a Dask scheduler address such as "tcp://host:8786"')
@@ -528,6 +701,7 @@ _POSITIVE = _num(0.0, what="a positive number")
 _SPEED = _num(0.0, what="a positive speed in rpm")
 _RATIO = _num(0.0, 1.0, lo_open=False)  # damping ratios: 0 <= zeta < 1
 _CONTACT = _num(1.0, 2.0, what="a contact ratio")
+_SHIFT = _num(-1.0, 1.5, lo_open=False, hi_open=False, what="a profile shift coefficient")
 _STIFFNESS = _num(0.0, what="a positive stiffness in MN/m", scale=1e6)
 _INERTIA = _num(0.0, what="a positive inertia in kg m^2")
 _MM = "a positive length in mm"
@@ -555,8 +729,18 @@ def _section(name: str, cls: type, spec: Mapping[str, _Key], post=None):
 
 
 def _gear_post(s: _Section, kw: dict[str, Any]) -> dict[str, Any]:
-    if s.exclusive("module_mm", "center_distance_mm", required=True) == "center_distance_mm":
+    shifted = kw.get("profile_shift_pinion", 0.0) != 0.0 or kw.get("profile_shift_gear", 0.0) != 0.0
+    if s.has("module_mm") and s.has("center_distance_mm"):
+        if not shifted:
+            raise ConfigError(s.key("center_distance_mm"), s.raw("center_distance_mm"),
+                              "give gear.module_mm or gear.center_distance_mm, not both (both only for a profile-"
+                              "shifted pair, where center_distance_mm is the working centre distance)")
+        kw["working_center_distance_m"] = kw.pop("center_distance_m")  # a_w of the shifted pair
+    elif s.exclusive("module_mm", "center_distance_mm", required=True) == "center_distance_mm":
         key, value = s.key("center_distance_mm"), s.raw("center_distance_mm")
+        if shifted:
+            raise ConfigError(key, value, "with profile shift also give gear.module_mm (center_distance_mm is then "
+                                          "the working centre distance)")
         teeth = kw["teeth_pinion"] + kw["teeth_gear"]
         kw["module_m"] = _si(key, value, kw.pop("center_distance_m"), 2.0 / teeth)
     s.exclusive("contact_ratio", "addendum_coefficient", required=False)
@@ -564,18 +748,27 @@ def _gear_post(s: _Section, kw: dict[str, Any]) -> dict[str, Any]:
 
 
 def _mesh_post(s: _Section, kw: dict[str, Any]) -> dict[str, Any]:
-    other = s.exclusive("k_mean_MN_per_m", "k_min_MN_per_m", required=True)
-    field_name = _MESH[other].field
-    if kw[field_name] > kw["k_max_N_per_m"]:
-        limit = kw["k_max_N_per_m"] * 1e-6
-        allowed = f"a stiffness <= mesh.k_max_MN_per_m = {limit:g}"
-        raise ConfigError(s.key(other), s.raw(other), allowed)
+    model = kw.get("stiffness_model", "rectangular")
+    for key in _MESH:
+        if s.has(key) and any(key in keys for keys in MODEL_KEYS.values()) and key not in MODEL_KEYS[model]:
+            raise _inapplicable(s.key(key), s.raw(key), model)
     kw.setdefault("ste_amplitude_m", ())
     kw.setdefault("ste_phase_rad", (0.0,) * len(kw["ste_amplitude_m"]))
     if len(kw["ste_phase_rad"]) != len(kw["ste_amplitude_m"]):
         n = len(kw["ste_amplitude_m"])
         raise ConfigError(s.key("ste_phase_deg"), s.raw("ste_phase_deg"),
                           f"a list of the same length as mesh.ste_amplitude_um ({n})")
+    if model == "pair_table":
+        s.get("pair_stiffness_file", _file)  # the "required" message when absent
+    if model != "rectangular":
+        return kw
+    s.get("k_max_MN_per_m", _STIFFNESS)  # the "required" message when absent
+    other = s.exclusive("k_mean_MN_per_m", "k_min_MN_per_m", required=True)
+    field_name = _MESH[other].field
+    if kw[field_name] > kw["k_max_N_per_m"]:
+        limit = kw["k_max_N_per_m"] * 1e-6
+        allowed = f"a stiffness <= mesh.k_max_MN_per_m = {limit:g}"
+        raise ConfigError(s.key(other), s.raw(other), allowed)
     return kw
 
 
@@ -590,11 +783,25 @@ _GEAR = {
     "face_width_mm": _Key("face_width_m", _num(0.0, what=_MM, scale=1e-3)),
     "inertia_pinion_kgm2": _Key("inertia_pinion_kgm2", _INERTIA, True),
     "inertia_gear_kgm2": _Key("inertia_gear_kgm2", _INERTIA, True),
+    "profile_shift_pinion": _Key("profile_shift_pinion", _SHIFT),
+    "profile_shift_gear": _Key("profile_shift_gear", _SHIFT),
+    "tip_shortening": _Key("tip_shortening", _boolean),
+    "bore_diameter_pinion_mm": _Key("bore_diameter_pinion_m", _num(0.0, what=_MM, scale=1e-3)),
+    "bore_diameter_gear_mm": _Key("bore_diameter_gear_m", _num(0.0, what=_MM, scale=1e-3)),
 }
 _MESH = {
-    "k_max_MN_per_m": _Key("k_max_N_per_m", _STIFFNESS, True),
+    "stiffness_model": _Key("stiffness_model", _one_of(STIFFNESS_MODELS)),
+    "k_max_MN_per_m": _Key("k_max_N_per_m", _STIFFNESS),  # required with "rectangular" (_mesh_post)
     "k_mean_MN_per_m": _Key("k_mean_N_per_m", _STIFFNESS),
     "k_min_MN_per_m": _Key("k_min_N_per_m", _STIFFNESS),
+    "pair_stiffness_file": _Key("pair_stiffness_file", _file),
+    "youngs_modulus_GPa": _Key("youngs_modulus_Pa", _num(0.0, 1000.0, what="a Young's modulus in GPa", scale=1e9)),
+    "poisson_ratio": _Key("poisson_ratio", _num(0.0, 0.5, what="a Poisson ratio")),
+    "rack_dedendum_coefficient": _Key("rack_dedendum_coefficient",
+                                      _num(1.0, 1.6, lo_open=False, hi_open=False, what="h_fP/m of the basic rack")),
+    "rack_tip_radius_coefficient": _Key("rack_tip_radius_coefficient",
+                                        _num(0.0, 0.5, lo_open=False, hi_open=False, what="rho_fP/m of the basic rack")),
+    "blank_factor": _Key("blank_factor", _num(0.0, 1.0, hi_open=False, what="the gear-blank factor C_R")),
     "damping_ratio": _Key("damping_ratio", _RATIO),
     "damping_model": _Key("damping_model", _one_of(DAMPING_MODELS)),
     "backlash_um": _Key("backlash_m", _num(0.0, lo_open=False, scale=1e-6)),
@@ -603,6 +810,13 @@ _MESH = {
 }
 _gear = _section("gear", GearConfig, _GEAR, _gear_post)
 _mesh = _section("mesh", MeshConfig, _MESH, _mesh_post)
+_RELIEF_UM = _num(0.0, lo_open=False, what="a relief amount in um (>= 0)", scale=1e-6)
+_RELIEF_MM = _num(0.0, lo_open=False, what="a relief length in mm (>= 0)", scale=1e-3)
+_profile = _section("profile", ProfileConfig, {
+    **{f"{name}{unit}": _Key(f"{name}{field_unit}", check) for name in _RELIEFS
+       for unit, field_unit, check in (("_um", "_m", _RELIEF_UM), ("_length_mm", "_length_m", _RELIEF_MM))},
+    "shape": _Key("shape", _one_of(PROFILE_SHAPES)),
+})
 _load = _section("load", LoadConfig, {
     "torque_pinion_Nm": _Key("torque_pinion_Nm", _num(0.0, what="a positive torque in N m"), True),
 })
@@ -640,7 +854,8 @@ _sweep = _section("sweep", SweepConfig, {
     "max_points": _Key("max_points", _int(2)),
     "step_rpm": _Key("step_rpm", _num(0.0, what="a positive step in rpm")),
     "period_doubling": _Key("period_doubling", _bool_or_auto),
-})  # start != stop is checked by SweepConfig itself
+    "orders": _Key("orders", _int(1, MAX_HARMONICS)),
+})  # start != stop is checked by SweepConfig itself; orders <= H / nu by the frc command
 _map = _section("map", MapConfig, {
     "speed_rpm_start": _Key("speed_rpm_start", _SPEED),
     "speed_rpm_stop": _Key("speed_rpm_stop", _SPEED),
@@ -655,6 +870,7 @@ _SECTIONS: dict[str, Callable[[object], Any]] = {
     "gear": _gear,
     "mesh": _mesh,
     "load": _load,
+    "profile": _profile,
     "friction": _friction,
     "boundary": _boundary,
     "solver": _solver,
@@ -707,8 +923,12 @@ def apply_overrides(data: Mapping[str, Any], overrides: Sequence[str]) -> dict[s
     return result
 
 
-def parse_config(data: Mapping[str, Any], overrides: Sequence[str] = ()) -> RunConfig:
+def parse_config(data: Mapping[str, Any], overrides: Sequence[str] = (), base_dir: str | Path | None = None
+                 ) -> RunConfig:
     """Validate a TOML-shaped dict (after applying `overrides`) into a :class:`RunConfig`.
+
+    Relative file names (`mesh.pair_stiffness_file`) are taken from `base_dir` (the config
+    file's directory; default the current directory) and stored absolute.
 
     **Raises:** :class:`~hbgear.errors.ConfigError` naming the first bad key.
     """
@@ -726,7 +946,12 @@ def parse_config(data: Mapping[str, Any], overrides: Sequence[str] = ()) -> RunC
     for name in _REQUIRED:
         if name not in data:
             raise ConfigError(name, _MISSING, f"a required section [{name}]")
-    return RunConfig(**{name: _SECTIONS[name](data[name]) for name in data})
+    sections = {name: _SECTIONS[name](data[name]) for name in data}
+    mesh = sections["mesh"]
+    if mesh.pair_stiffness_file is not None:
+        path = Path(base_dir if base_dir is not None else Path.cwd(), mesh.pair_stiffness_file).absolute()
+        sections["mesh"] = dataclasses.replace(mesh, pair_stiffness_file=path)
+    return RunConfig(**sections)
 
 
 def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
@@ -746,4 +971,4 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
     except tomllib.TOMLDecodeError as exc:
         reason = " ".join(str(exc).split())
         raise ConfigError("config", str(path), f"a readable TOML file ({reason})") from None
-    return parse_config(data, overrides)
+    return parse_config(data, overrides, base_dir=Path(path).parent)

@@ -204,3 +204,53 @@ def test_python_dash_m_entry_point(tmp_path):
     assert result.returncode == 0 and "0.1.0" in result.stdout
     result = run()
     assert result.returncode == 2
+
+
+# ----------------------------------------------------------------------------- hbgear validate as a gate
+
+
+@pytest.fixture
+def fake_compare(monkeypatch):
+    """`hbgear validate` with HB vs TI replaced by rows of given differences (no computation):
+    DTE p2p 0.2 % off at 5000 rpm, 0.01 % elsewhere; records the speeds asked for."""
+    from hbgear.cli import validate
+
+    seen = []
+
+    def compare(config, model, speed_rpm):
+        seen.append(speed_rpm)
+        p2p = 2e-3 if speed_rpm == 5000.0 else 1e-4
+        return [speed_rpm, 3.0, 3.0, 12.0, 12.0 / (1 + p2p), 0.0, p2p], None, None
+
+    monkeypatch.setattr(validate, "compare", compare)
+    monkeypatch.setattr(validate, "_plot", lambda results, path: path.write_bytes(b"figure"))
+    return seen
+
+
+@pytest.mark.parametrize("form", [["--speed", "3000", "--speed", "4000"], ["--speed", "3000", "4000"]],
+                         ids=["repeated", "one-flag"])
+def test_validate_speed_flags_add_up(fake_compare, tmp_path, capsys, form):
+    status, _, err = run_main(capsys, "validate", EXAMPLE, "--out", tmp_path, *form)
+    assert status == 0 and err == ""
+    assert fake_compare == [3000.0, 4000.0]  # the last flag does not win
+    assert len((tmp_path / "validation.csv").read_text().splitlines()) == 1 + 2
+
+
+def test_validate_exits_3_naming_what_disagrees_and_still_writes(fake_compare, tmp_path, capsys):
+    status, _, err = run_main(capsys, "validate", EXAMPLE, "--out", tmp_path, "--speed", "3000", "5000")
+    assert status == 3
+    assert err.count("\n") == 1 and err.startswith("hbgear: validation failed: 5000 rpm DTE p2p HB vs TI +0.2 %"), err
+    assert "3000 rpm" not in err and "RMS" not in err and "tolerance 0.1 %" in err
+    assert len((tmp_path / "validation.csv").read_text().splitlines()) == 1 + 2
+    assert (tmp_path / "validation.png").read_bytes() == b"figure"
+    # a wider tolerance accepts the same differences
+    status, _, err = run_main(capsys, "validate", EXAMPLE, "--out", tmp_path, "--speed", "3000", "5000",
+                              "--tolerance", "5e-3")
+    assert status == 0 and err == ""
+
+
+@pytest.mark.parametrize("value", ["0", "-1e-3", "nan", "wide"])
+def test_validate_rejects_a_bad_tolerance(fake_compare, tmp_path, capsys, value):
+    status, _, err = run_main(capsys, "validate", EXAMPLE, "--out", tmp_path / "o", "--tolerance", value)
+    assert status == 2 and err.count("\n") == 1 and "--tolerance" in err
+    assert fake_compare == [] and not (tmp_path / "o").exists()

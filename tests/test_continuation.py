@@ -300,7 +300,7 @@ def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
 def test_frc_falls_back_to_solve_periodic_when_the_start_guess_fails(tmp_path, monkeypatch):
     """A start guess Newton cannot use (NaN here) costs only the detour: the curve is the same as
     from the regular guess, started from solve_periodic's staged start."""
-    import hbgear.cli.frc as frc_module
+    import hbgear.gear.response as frc_module
     from hbgear import cli
 
     def run(out):

@@ -22,7 +22,8 @@ import pytest
 from hbgear.gear.bifurcation import embed_subharmonic, half_order_indices, solve_period_doubled
 from hbgear.build import build_model
 from hbgear.cli import main
-from hbgear.cli.frc import COLUMNS, PD_AUTO_MAX_UNKNOWNS, period_doubling_enabled
+from hbgear.cli.frc import period_doubling_enabled
+from hbgear.gear.response import COLUMNS, PD_AUTO_MAX_UNKNOWNS
 from hbgear.config import load_config
 from hbgear.gear.simulate import simulate
 from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
@@ -143,9 +144,11 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     needs the variational monodromy. Started from Hill's crossing (0.23 rpm off the exact one at
     this N) it is the crossing of the exact search over the whole segment (to the speed
     tolerance) for fewer monodromies; a misleading Hill start still ends on it."""
-    from hbgear.gear import monodromy as stability
-    from hbgear.cli import frc as frc_command
+    from hbgear.engine import bifurcation as frc_command
+    from hbgear.engine import monodromy as stability
     from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.response import newton_solve
+    from hbgear.gear.system import GearSystem
 
     model = build_model(load_config(Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml",
                                     ["friction.model='NLTV'", "friction.law='arctan'"]))
@@ -156,14 +159,18 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     branch = SimpleNamespace(p=p, z=z)
     calls = []
     monodromy = stability.monodromy_variational
-    monkeypatch.setattr(stability, "monodromy_variational", lambda *a, **k: calls.append(1) or monodromy(*a, **k))
+    monkeypatch.setattr(frc_command, "monodromy_variational", lambda *a, **k: calls.append(1) or monodromy(*a, **k))
 
     def locate():
         calls.clear()
-        point, why = frc_command._locate_on_segment(model, hb, branch, 0, harmonics, samples, 1e-9, 30)
+        point, why = frc_command.locate_period_doubling(GearSystem(model), hb, solve, branch.p[0], branch.z[0],
+                                                        branch.p[1], branch.z[1])
         assert point is not None, why
         assert point.multiplier == pytest.approx(-1.0, abs=1e-6)
-        return point.omega, len(calls)
+        return point.p, len(calls)
+
+    def solve(p, z0):
+        return newton_solve(hb, GearSystem(model), p, z0, tolerance=1e-9, max_iterations=30).z
 
     from_hill, hill_calls = locate()
     monkeypatch.setattr(frc_command, "_hill_crossing", lambda *a: None)
@@ -173,7 +180,7 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     assert hill_calls < exact_calls
     # Hill's slope of the wrong sign (mu + 1 falls with the speed here): stepped out to the segment's end without a sign change, then
     # the whole segment is searched
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda model, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0))
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0))
     fallback, fallback_calls = locate()
     assert fallback == pytest.approx(exact, rel=2e-7)
     assert fallback_calls > exact_calls
@@ -183,6 +190,6 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     def failing(*a):
         raise ConvergenceError("not converged (test)")
 
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda model, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3))
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3))
     monkeypatch.setattr(frc_command, "_exact_bracket", failing)
     assert locate()[0] == pytest.approx(exact, rel=2e-7)

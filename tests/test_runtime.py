@@ -1,4 +1,5 @@
-"""Import-time JAX set-up: the one-thread XLA runtime must leave no thread pinned to one CPU."""
+"""Process-wide settings: ``import hbgear`` changes none; ``hbgear.runtime.configure()`` sets up the
+one-thread XLA runtime (leaving no thread pinned to one CPU) and the disk compilation cache."""
 
 import os
 import subprocess
@@ -7,26 +8,58 @@ import textwrap
 
 import pytest
 
-CHECK = textwrap.dedent("""
-    import os, hbgear, jax, jax.numpy as jnp
-    jnp.ones(3).sum().block_until_ready()
-    mask = os.sched_getaffinity(0)
-    pinned = [t for t in os.listdir("/proc/self/task") if os.sched_getaffinity(int(t)) != mask]
-    print(len(mask), len(pinned))
-""")
+MULTI_CPU = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                               reason="needs CPU affinity (Linux) and at least two CPUs")
 
 
-@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
-                    reason="needs CPU affinity (Linux) and at least two CPUs")
+def _run(code: str, **env) -> str:
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(os.environ, **env),
+                         capture_output=True, text=True, check=True)
+    return out.stdout + out.stderr
+
+
+def test_import_changes_no_process_setting(tmp_path):
+    out = _run("""
+        import os, sys
+        mask = os.sched_getaffinity(0)
+        import hbgear
+        print("jax imported:", "jax" in sys.modules)
+        model = hbgear.build_model(hbgear.load_config("examples/paper_table1.toml"))
+        sol = hbgear.solve(model, speed_rpm=3000.0, harmonics=4, samples=64)
+        import jax
+        pinned = [t for t in os.listdir("/proc/self/task") if os.sched_getaffinity(int(t)) != mask]
+        print("cache:", jax.config.jax_compilation_cache_dir, "pinned:", len(pinned), "mask kept:",
+              os.sched_getaffinity(0) == mask, "x64:", jax.config.jax_enable_x64)
+    """, XDG_CACHE_HOME=str(tmp_path))
+    assert "jax imported: False" in out
+    assert "cache: None pinned: 0 mask kept: True x64: True" in out
+    assert not (tmp_path / "hbgear").exists()
+
+
+@MULTI_CPU
 @pytest.mark.parametrize("setting", ["1", "default"])
-def test_import_restores_cpu_affinity(setting):
-    env = dict(os.environ, HBGEAR_RUNTIME_THREADS=setting)
-    out = subprocess.run([sys.executable, "-c", CHECK], env=env, capture_output=True, text=True, check=True)
-    cpus, pinned = map(int, out.stdout.split())
-    assert cpus == len(os.sched_getaffinity(0)) and pinned == 0
+def test_configure_restores_cpu_affinity_and_enables_the_cache(setting, tmp_path):
+    out = _run("""
+        import os, hbgear
+        done = hbgear.runtime.configure()
+        import jax, jax.numpy as jnp
+        jnp.ones(3).sum().block_until_ready()
+        mask = os.sched_getaffinity(0)
+        pinned = [t for t in os.listdir("/proc/self/task") if os.sched_getaffinity(int(t)) != mask]
+        print(len(mask), len(pinned), done["single_thread"], jax.config.jax_compilation_cache_dir == done["cache_dir"])
+    """, HBGEAR_RUNTIME_THREADS=setting, XDG_CACHE_HOME=str(tmp_path))
+    cpus, pinned, single, cache = out.split()
+    assert int(cpus) == len(os.sched_getaffinity(0)) and int(pinned) == 0
+    assert single == ("True" if setting == "1" else "False") and cache == "True"
+    assert (tmp_path / "hbgear" / "jax").is_dir()
 
 
 def test_unknown_runtime_threads_setting_warns_and_uses_one_thread():
-    env = dict(os.environ, HBGEAR_RUNTIME_THREADS="4")
-    out = subprocess.run([sys.executable, "-c", "import hbgear"], env=env, capture_output=True, text=True, check=True)
-    assert "HBGEAR_RUNTIME_THREADS = '4': expected '1' or 'default'" in out.stderr
+    out = _run("import hbgear; hbgear.runtime.configure(cache=False)", HBGEAR_RUNTIME_THREADS="4")
+    assert "HBGEAR_RUNTIME_THREADS = '4': expected '1' or 'default'" in out
+
+
+def test_no_cache_setting_leaves_the_cache_off(tmp_path):
+    out = _run("import hbgear; print(hbgear.runtime.configure(threads=False))", HBGEAR_NO_CACHE="1",
+               XDG_CACHE_HOME=str(tmp_path))
+    assert "'cache_dir': None" in out and not (tmp_path / "hbgear").exists()

@@ -28,7 +28,8 @@ from hbgear.engine.quadrature import (fourier_coefficients, lattice_coefficients
                                       mesh_period_rule)
 from hbgear.engine.structured import product_samples
 from hbgear.engine.system import Duffing
-from hbgear.gear.monodromy import floquet_multipliers, solution_multipliers
+from hbgear.engine.response import solution_multipliers as engine_multipliers
+from hbgear.gear.monodromy import floquet_multipliers
 from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 from hbgear.gear.system import GearSystem
 
@@ -41,6 +42,11 @@ GEAR_CASES = {
                  "boundary.output='reaction'"],
     "LTV-B arctan": ["friction.model='LTV'", "friction.law='arctan'", "friction.formulation='B'"],
 }
+
+
+def solution_multipliers(solution):
+    """The Floquet multipliers the solve path computes for a solution (the engine's choice)."""
+    return engine_multipliers(solution.hb, solution.system, solution.z, solution.parameter)
 
 
 def gear(case):

@@ -82,7 +82,9 @@ soft-spring output, time integration (hbgear.gear.simulate) to steady state.
 
 What matches the paper in kind:
 - A: the friction force of each pair is piecewise constant, mu0 sigma_j N = {0.1 * a.pairs['normal'].max() / 2:.0f} N in
-  double contact and {dfa:.0f} N in single contact, reversing sign at the pitch point (Fig. 4a).
+  double contact and {dfa:.0f} N in single contact, reversing sign at the pitch point (Fig. 4a). These
+  levels hold by construction (formulation A's load is sigma_j N with the nominal sliding direction):
+  a check of the code, not evidence.
 - B: the friction force follows the dynamic mesh force (it carries the mesh-frequency ripple
   and the jumps at pair entry/exit), as in Fig. 4b; the DTE differs only slightly between A
   and B at this speed (rms {a.summary['dte_rms_um']:.4f} vs {b.summary['dte_rms_um']:.4f} um).

@@ -92,7 +92,8 @@ Means are quadrature means over one steady period (hbgear.gear.readouts.periodic
 """ + "\n".join(rows) + f"""
 
 What matches the paper: with constant torques the net input power oscillates about a zero
-mean (friction is not balanced: the rigid-body speed would drift); with the soft spring the
+mean (friction is not balanced: the rigid-body speed would drift; the zero mean holds by
+construction, T_g = T_p R_bg/R_bp at the nominal speeds of the DTE-only model); with the soft spring the
 mean net power equals the friction loss plus the mesh power to rounding (balance error above).
 The mesh power is small and may be negative: it is the viscous loss plus the work of the
 jumping stiffness, <k(t) delta delta'>, which is not zero when k jumps.

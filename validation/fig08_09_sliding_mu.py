@@ -101,7 +101,7 @@ Steady after {ltv.cycles} (LTV) / {nltv.cycles} (NLTV) mesh cycles; DTE rms {ltv
 {nltv.summary['dte_rms_um']:.4f} um.
 
 What matches the paper in kind: quasi-static and LTV sliding velocities are the straight
-nominal lines with one pitch crossing; with NLTV the vibration velocity (the mesh mode ringing
+nominal lines with one pitch crossing (by construction: LTV uses the nominal kinematics); with NLTV the vibration velocity (the mesh mode ringing
 after each stiffness jump at pair entry and exit) is of the order of the nominal sliding
 velocity, so Vs and mu reverse several times (Fig. 9: multiple pitch-point crossings).
 

@@ -26,8 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hbgear.gear import maps as gear_maps
-
+from hbgear.build import model_at_contact_ratio
 from hbgear.gear import monodromy
 from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
@@ -60,7 +59,7 @@ def _ti_point(task):
     omega = rpm_to_rad_s(float(rpm))
     out = []
     for cfg in _configs(zeta, formulation):
-        model = gear_maps.model_at_contact_ratio(cfg, gamma)
+        model = model_at_contact_ratio(cfg, gamma)
         rec = march(model, omega, cycles, samples_per_cycle=64, rtol=TI_RTOL, max_abs_dte_m=TI_BLOWUP_M)
         out.append(rec.dte_p2p_um)
     return out
@@ -110,7 +109,7 @@ def ti_ratio_map(speeds_rpm, ratios, formulations=("A", "B"), *, cycles: int = T
         m["kind"] = np.full(shape, "", dtype=object)
         ltv_cfg, _ = _configs(zeta, f)
         for i, g in enumerate(ratios):
-            m["mult"][i] = np.max(np.abs(monodromy.multipliers_linear(gear_maps.model_at_contact_ratio(ltv_cfg, g),
+            m["mult"][i] = np.max(np.abs(monodromy.multipliers_linear(model_at_contact_ratio(ltv_cfg, g),
                                                                rpm_to_rad_s(np.asarray(speeds_rpm, float)))), axis=-1)
             for j in range(len(speeds_rpm)):
                 p_l, p_n = next(it)
@@ -131,8 +130,8 @@ def ratio_map(speeds_rpm, ratios, *, harmonics: int = 32, samples: int = 256, ze
     shape = (len(ratios), len(speeds_rpm))
     p_ltv, p_nl, mult = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     for i, gamma in enumerate(ratios):
-        ltv = gear_maps.model_at_contact_ratio(cfg_ltv, gamma)
-        nltv = gear_maps.model_at_contact_ratio(cfg_nltv, gamma)
+        ltv = model_at_contact_ratio(cfg_ltv, gamma)
+        nltv = model_at_contact_ratio(cfg_nltv, gamma)
         omegas = rpm_to_rad_s(np.asarray(speeds_rpm, float))
         mult[i] = np.max(np.abs(monodromy.multipliers_linear(ltv, omegas)), axis=-1)
         z = None

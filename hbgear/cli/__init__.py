@@ -1,17 +1,22 @@
 """Command-line framework: `hbgear <command> CONFIG [--set section.key=value ...] [--out DIR]`.
 
 Commands live in a registry (:data:`COMMANDS`) filled through :func:`register`; the built-in
-ones (`frc`, `solve`, `simulate`, `stability-map`, `validate`) are the modules of this package
+ones (`frc`, `solve`, `simulate`, `stability-map`, `static-te`, `validate`) are the modules of this package
 (see :func:`_load_builtin_commands`).
 
 Flow of :func:`main`: parse the arguments -> :func:`hbgear.config.load_config` with the
-overrides -> the command's optional `validate(config, args)` -> create the output directory
-(only now, so a bad input never leaves anything behind) -> `run(config, args, out_dir)`.
+overrides -> :func:`hbgear.build.check_config` (the physics checks) -> the command's optional
+`validate(config, args)` -> create the output directory (only now, so a bad input never leaves
+anything behind) -> :func:`hbgear.runtime.configure` -> `run(config, args, out_dir)`. Everything
+before `run` imports neither JAX nor matplotlib, so ``--help``, ``--version`` and every bad input
+answer at once; command modules import their heavy dependencies inside `run`.
 
 Exit status: 0 success (or what `run` returns); 2 bad input -- a
 :class:`~hbgear.errors.ConfigError` or a usage error -- with exactly one line
 `hbgear: error: <message>` on stderr; 1 a :class:`~hbgear.errors.ConvergenceError`
-(`hbgear: did not converge: <message>`); 130 interrupted (Ctrl-C).
+(`hbgear: did not converge: <message>`); 3 a :class:`CheckFailed` raised by a command after
+writing its outputs (`hbgear validate`: HB and time integration disagree; `hbgear: validation
+failed: <message>`); 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -26,12 +31,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
+from .. import runtime
+from ..build import check_config
 from ..config import RunConfig, load_config
 from ..errors import ConfigError, ConvergenceError
 from ..outputs.io import prepare_out_dir
 
 __all__ = [
     "COMMANDS",
+    "CheckFailed",
     "Command",
     "build_parser",
     "check_positive",
@@ -42,7 +50,11 @@ __all__ = [
 ]
 
 PROG = "hbgear"
-EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_CHECK_FAILED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+class CheckFailed(Exception):
+    """A command's check did not hold (its outputs are written): exit 3, one stderr line."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +72,8 @@ class Command:
       `ConfigError` for bad input and `ConvergenceError` for a failed computation.
     - `validate(config, args)`: optional check of the command's options against the
       config, run before the output directory is created; raise `ConfigError`.
+    - `dynamic_model`: the command builds the dynamic model, so the config's physics checks
+      (:func:`hbgear.build.check_config`) run first.
     """
 
     name: str
@@ -67,6 +81,7 @@ class Command:
     add_arguments: Callable[[argparse.ArgumentParser], None] | None
     run: Callable[[RunConfig, argparse.Namespace, Path], int]
     validate: Callable[[RunConfig, argparse.Namespace], None] | None = None
+    dynamic_model: bool = True
 
 
 COMMANDS: dict[str, Command] = {}
@@ -86,7 +101,7 @@ def register(command: Command, *, replace: bool = False) -> Command:
 
 
 #: The shipped commands: one module each in this package, registering itself on import.
-BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "validate")
+BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "static_te", "validate")
 
 
 def _load_builtin_commands() -> None:
@@ -169,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Steady-state vibration of a spur-gear pair with tooth friction, by "
         "harmonic balance and time integration.",
-        epilog="Exit status: 0 success, 1 did not converge, 2 bad input, 130 interrupted.",
+        epilog="Exit status: 0 success, 1 did not converge, 2 bad input, 3 validation failed, 130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
@@ -219,11 +234,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         command = COMMANDS[args.command]
         config = load_config(args.config, args.overrides or ())
+        if command.dynamic_model:
+            check_config(config)
         if command.validate is not None:
             command.validate(config, args)
         out_dir = args.out if args.out is not None else Path("hbgear-out") / command.name
         created = not out_dir.exists()
         out_dir = prepare_out_dir(out_dir)
+        runtime.configure()  # one XLA thread, the disk compilation cache: before any computation
         status = command.run(config, args, out_dir)
         return EXIT_OK if status is None else int(status)
     except _UsageError as exc:
@@ -234,6 +252,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConvergenceError as exc:
         _remove_if_empty(out_dir, created)
         return _fail("did not converge", exc, EXIT_NOT_CONVERGED)
+    except CheckFailed as exc:
+        return _fail("validation failed", exc, EXIT_CHECK_FAILED)
     except KeyboardInterrupt:
         _remove_if_empty(out_dir, created)
         return _fail("interrupted", "stopped by the user (no partial files written)", 130)

@@ -23,15 +23,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from ..build import build_model
 from . import Command, positive_float, positive_int, register
-from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
-from ..gear.model import PAIR_SLOTS
-from ..gear.simulate import march, simulate
 
-__all__ = ["SIMULATE", "run", "timeseries_table", "plot_timeseries"]
+__all__ = ["SIMULATE", "run", "timeseries_table"]
 
 
 def add_arguments(parser) -> None:
@@ -68,56 +62,25 @@ def model_description(model) -> dict:
     }
 
 
-def timeseries_table(res):
+def timeseries_table(res, pair_slots: int):
     """Header and rows of `timeseries.csv` from a :class:`~hbgear.gear.simulate.TimeResponse`."""
+    import numpy as np
+
     header = ["time_s", "mesh_phase", "dte_um", "dte_velocity_m_per_s", "mesh_force_N"]
     columns = [res.t, res.s, 1e6 * res.q[0], res.qd[0], res.mesh_force]
-    for k in range(PAIR_SLOTS):
-        header += [
-            f"pair{k + 1}_normal_load_N",
-            f"pair{k + 1}_mu",
-            f"pair{k + 1}_friction_force_N",
-            f"pair{k + 1}_sliding_velocity_m_per_s",
-        ]
+    for k in range(pair_slots):
+        header += [f"pair{k + 1}_normal_load_N", f"pair{k + 1}_mu", f"pair{k + 1}_friction_force_N",
+                   f"pair{k + 1}_sliding_velocity_m_per_s"]
         columns += [res.pairs["normal"][k], res.pairs["mu"][k], res.pairs["friction"][k], res.pairs["vs"][k]]
     return header, np.column_stack(columns)
 
 
-def plot_timeseries(res, title=None):
-    """Figure: DTE; mesh force and per-pair normal loads; per-pair friction forces."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    t_ms = 1e3 * res.t
-    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    axes[0].plot(t_ms, 1e6 * res.q[0], color="k")
-    axes[0].set_ylabel("DTE [um]")
-    axes[1].plot(t_ms, res.mesh_force, color="k", label="mesh force")
-    contact = res.pairs["sigma"] > 0
-    for k in range(PAIR_SLOTS):
-        axes[1].plot(t_ms, np.where(contact[k], res.pairs["normal"][k], np.nan), label=f"pair {k + 1} normal load")
-        axes[2].plot(t_ms, np.where(contact[k], res.pairs["friction"][k], np.nan), label=f"pair {k + 1}")
-    axes[1].set_ylabel("force [N]")
-    axes[2].set_ylabel("friction force [N]")
-    axes[2].set_xlabel("time [ms]")
-    for ax in axes[1:]:
-        ax.legend(fontsize=8, loc="upper right")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    fig.suptitle(title or (
-        f"{res.speed_rpm:.6g} rpm: steady state after {res.cycles} mesh cycles "
-        f"(period {res.period_cycles} mesh cycle{'s' if res.period_cycles > 1 else ''})"
-    ))
-    fig.tight_layout()
-    return fig
-
-
 def _last_cycles(model, rec, count: int = 2):
     """The last `count` cycles of a :class:`~hbgear.gear.simulate.MarchRecord` as the fields
-    :func:`timeseries_table` and :func:`plot_timeseries` read."""
+    :func:`timeseries_table` and :func:`hbgear.outputs.plots.timeseries_figure` read."""
     from types import SimpleNamespace
+
+    import numpy as np
 
     count = min(count, rec.cycles)
     first = rec.first_cycle + rec.cycles - count
@@ -133,6 +96,11 @@ def _last_cycles(model, rec, count: int = 2):
 
 def run_march(config, args, out_dir, model, cycles) -> int:
     """`--march`: exactly `cycles` mesh cycles from the static state (see the module docstring)."""
+    import numpy as np
+
+    from ..gear.simulate import march
+    from ..outputs.io import write_csv_atomic
+
     sim = config.simulate
     rec = march(model, args.speed * math.pi / 30.0, int(cycles), rtol=sim.rtol, atol=sim.atol_m)
     window = min(20, rec.cycles - 1)
@@ -161,32 +129,31 @@ def run_march(config, args, out_dir, model, cycles) -> int:
 
 def _write_outputs(out_dir, record, summary, title=None) -> None:
     """`timeseries.csv`, `timeseries.png` and `summary.json` of a run (steady state or march)."""
-    header, rows = timeseries_table(record)
-    write_csv_atomic(out_dir / "timeseries.csv", header, rows)
-    fig = plot_timeseries(record, title=title)
-    try:
-        save_figure_atomic(fig, out_dir / "timeseries.png", dpi=120)
-    finally:
-        import matplotlib.pyplot as plt
+    from ..gear.model import PAIR_SLOTS
+    from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
+    from ..outputs.plots import timeseries_figure
 
-        plt.close(fig)
+    header, rows = timeseries_table(record, PAIR_SLOTS)
+    write_csv_atomic(out_dir / "timeseries.csv", header, rows)
+    save_figure_atomic(timeseries_figure(record, PAIR_SLOTS, title=title), out_dir / "timeseries.png", dpi=120)
     write_json_atomic(out_dir / "summary.json", summary)
 
 
 def run(config, args, out_dir) -> int:
+    from ..build import build_model
+    from ..errors import ConvergenceError
+    from ..gear.simulate import simulate
+
     model = build_model(config)
     sim = config.simulate
     cycles = args.cycles if args.cycles is not None else sim.cycles
     if getattr(args, "march", False):
         return run_march(config, args, out_dir, model, cycles)
-    res = simulate(
-        model,
-        args.speed * math.pi / 30.0,
-        max_cycles=max(int(cycles), 2),
-        rtol=sim.rtol,
-        atol=sim.atol_m,
-        steady_tolerance=sim.steady_tolerance,
-    )
+    try:
+        res = simulate(model, args.speed * math.pi / 30.0, max_cycles=max(int(cycles), 2), rtol=sim.rtol,
+                       atol=sim.atol_m, steady_tolerance=sim.steady_tolerance)
+    except ConvergenceError as error:
+        raise ConvergenceError(f"{error} (allow more cycles: --cycles / simulate.cycles)") from None
     summary = {"speed_rpm": args.speed, "mesh_freq_hz": args.speed / 60.0 * model.teeth_pinion}
     summary |= res.summary
     if model.boundary == "reaction":  # the output torque periodicity fixed

@@ -30,16 +30,12 @@ import numpy as np
 
 from . import Command, register
 from ..errors import ConfigError
-from ..outputs.io import save_figure_atomic, to_jsonable, write_csv_atomic, write_text_atomic
+from ..outputs.io import to_jsonable, write_csv_atomic, write_text_atomic
 
-__all__ = ["STABILITY_MAP", "compute_row", "grid", "plot_stability_map", "run_map"]
+__all__ = ["STABILITY_MAP", "compute_row", "grid", "run_map"]
 
 HEADER = ("speed_rpm", "contact_ratio", "max_abs_floquet")
 PARTIAL = "stability.partial.csv"
-#: The unit contour is drawn at 1 + this, so a neutral mode (the soft output spring's, whose
-#: modulus is 1 to within rounding) does not draw noise all over the map.
-CONTOUR_MARGIN = 1e-6
-
 
 def grid(config) -> tuple[np.ndarray, np.ndarray]:
     """``(speeds_rpm, contact_ratios)`` of ``[map]``."""
@@ -51,9 +47,14 @@ def grid(config) -> tuple[np.ndarray, np.ndarray]:
 
 def compute_row(config, contact_ratio: float, speeds_rpm) -> np.ndarray:
     """max |multiplier| at every speed for one contact ratio (the task sent to workers)."""
+    from ..build import model_at_contact_ratio
     from ..gear.maps import stability_row
 
-    return np.asarray(stability_row(config, float(contact_ratio), np.asarray(speeds_rpm, float)), dtype=float)
+    so = config.solver
+    model = model_at_contact_ratio(config, float(contact_ratio))
+    values = stability_row(model, np.asarray(speeds_rpm, float), harmonics=int(so.harmonics or 24),
+                           nu=int(so.subharmonic), samples=int(so.time_samples))
+    return np.asarray(values, dtype=float)
 
 
 # ----------------------------------------------------------------------------- partial file
@@ -179,13 +180,11 @@ def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool 
         HEADER,
         ((float(s), float(g), float(values[i, k])) for i, g in enumerate(ratios) for k, s in enumerate(speeds)),
     )
-    fig = plot_stability_map(speeds, ratios, values, title=_title(config))
-    try:
-        save_figure_atomic(fig, out_dir / "stability.png", dpi=130)
-    finally:
-        import matplotlib.pyplot as plt
+    from ..outputs.io import save_figure_atomic
+    from ..outputs.plots import stability_map_figure
 
-        plt.close(fig)
+    save_figure_atomic(stability_map_figure(speeds, ratios, values, title=_title(config)), out_dir / "stability.png",
+                       dpi=130)
     partial.unlink(missing_ok=True)
     return speeds, ratios, values
 
@@ -196,47 +195,6 @@ def _title(config) -> str:
         f"max |Floquet multiplier| per mesh period: {f.model}-{f.formulation}, {f.law} mu0={f.mu0:g}, "
         f"zeta={config.mesh.damping_ratio:g}, boundary {config.boundary.output}"
     )
-
-
-def plot_stability_map(speeds_rpm, contact_ratios, values, title: str = "", ax=None):
-    """Colour map of max |multiplier| over speed x contact ratio with the unit contour.
-
-    **Returns:** the matplotlib ``Figure``.
-    """
-    import matplotlib
-
-    if ax is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import TwoSlopeNorm
-
-    speeds_rpm, contact_ratios = np.asarray(speeds_rpm), np.asarray(contact_ratios)
-    values = np.asarray(values, dtype=float)
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(7.5, 4.8), layout="constrained")
-    else:
-        fig = ax.figure
-    finite = values[np.isfinite(values)]
-    lo = float(finite.min()) if finite.size else 0.5
-    hi = float(finite.max()) if finite.size else 1.5
-    lo, hi = min(lo, 1.0 - 1e-3), max(hi, 1.0 + 1e-3)
-    if len(speeds_rpm) > 1 and len(contact_ratios) > 1:
-        mesh = ax.pcolormesh(
-            speeds_rpm, contact_ratios, values, shading="nearest", cmap="RdBu_r", norm=TwoSlopeNorm(1.0, lo, hi)
-        )
-        fig.colorbar(mesh, ax=ax, label="max |multiplier|")
-        if np.nanmin(values) < 1.0 + CONTOUR_MARGIN < np.nanmax(values):
-            ax.contour(speeds_rpm, contact_ratios, values, levels=[1.0 + CONTOUR_MARGIN], colors="k", linewidths=1.2)
-        ax.set_ylabel("contact ratio Gamma [-]")
-    else:
-        for i, g in enumerate(contact_ratios):
-            ax.plot(speeds_rpm, values[i], ".-", label=f"Gamma = {g:.4g}")
-        ax.axhline(1.0, color="k", lw=0.8)
-        ax.set_ylabel("max |multiplier|")
-        ax.legend(fontsize=8)
-    ax.set_xlabel("pinion speed [rpm]")
-    ax.set_title(title, fontsize=8)
-    return fig
 
 
 # ----------------------------------------------------------------------------- command

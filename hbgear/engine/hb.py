@@ -42,7 +42,6 @@ import numpy as np
 from . import fourier, structured
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 
-jax.config.update("jax_enable_x64", True)
 
 __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions",
            "STRUCTURED_MIN_SIZE"]
@@ -414,6 +413,21 @@ class HarmonicBalance:
         slot = k * self.block
         extra = z[slot] * system.force_scale
         return x.at[slot].set(0.0), extra
+
+    def decode(self, system, z):
+        """Scaled unknowns ``z`` ``(..., size)`` -> ``(coefficients, extra)`` in SI (numpy):
+        coefficients ``(..., ndof, 2H+1)`` (a free coordinate's mean slot zeroed) and the constant
+        force unknown ``(...)`` it held (zeros without a ``free_mean_dof``)."""
+        z = np.asarray(z, dtype=float)
+        x = z * float(system.displacement_scale)
+        extra = np.zeros(z.shape[:-1])
+        k = system.free_mean_dof
+        if k is not None:
+            slot = k * self.block
+            extra = z[..., slot] * float(system.force_scale)
+            x = x.copy()
+            x[..., slot] = 0.0
+        return x.reshape(z.shape[:-1] + (self.ndof, self.block)), extra
 
     def _nonlinear(self, x, velocity, extra, p, system, layout=None):
         """``P Q_nl(E x, E v)`` in SI (zero for linear systems), jump-corrected (:meth:`_sample_points`)."""

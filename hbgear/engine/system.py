@@ -46,7 +46,8 @@ Declared facts (class attributes with the defaults below; a claim the engine can
 checked, e.g. ``forcing_affine_in_frequency`` at a third parameter value, ``ndof`` against the
 shapes returned, ``is_linear`` at a probe state):
 
-- ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none).
+- ``breakpoints(p, xp)`` -- phases in [0, 1] where ``Q`` may jump (default: none); values outside
+  [0, 1] and duplicates are ignored, so a traced computation may return candidates unfiltered.
 - ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
   replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
   its two trivial Floquet multipliers at 1 are dropped.
@@ -63,6 +64,18 @@ shapes returned, ``is_linear`` at a probe state):
 - ``piecewise_constant_coefficients = False`` -- a linear system whose homogeneous coefficients
   are constant between the breakpoints: its monodromy matrix is an exact product of matrix
   exponentials.
+- ``frequency_scale(p)`` -- a typical natural frequency [rad/s] (default: ``w_exc(p)``), the
+  velocity scale that balances the monodromy matrix (a similarity: it changes rounding only).
+- ``neutral_multipliers(p, nu)`` -- multipliers of modes the system adds by construction and knows
+  to be neutral (e.g. an undamped soft spring standing for a free rotation: ``exp(+-i w T)``),
+  shape ``np.shape(p) + (t,)``; the multiplier nearest each, within
+  :data:`~hbgear.engine.floquet.TRIVIAL_TOL`, is reported but left out of the stability verdict
+  (default: none).
+- ``linearization()`` / ``in_linear_regime(hb, z, p)`` -- a linear system whose variational
+  equations are this system's along every solution for which ``in_linear_regime`` is true (the
+  gear pair with backlash while its teeth keep contact); there the exact monodromy of the linear
+  system gives the Floquet multipliers. Defaults: ``self`` for a linear system (always in its
+  regime), ``None`` otherwise.
 """
 
 from __future__ import annotations
@@ -107,13 +120,31 @@ class PeriodicSystem:
         """Phases in [0, 1] where the force may jump (none by default)."""
         return xp.zeros(0)
 
+    def frequency_scale(self, p):
+        """A typical natural frequency [rad/s] (balancing of monodromy matrices); ``w_exc(p)``."""
+        return self.excitation_frequency(p)
+
+    def neutral_multipliers(self, p, nu: int = 1):
+        """Known neutral multipliers over the base period (``nu`` excitation periods), shape
+        ``np.shape(p) + (t,)``; none by default."""
+        return np.zeros(np.shape(p) + (0,), dtype=complex)
+
+    def linearization(self) -> PeriodicSystem | None:
+        """The linear system whose variational equations are this one's in its linear regime."""
+        return self if self.is_linear else None
+
+    def in_linear_regime(self, hb, z, p) -> bool:
+        """Whether the solution `z` (scaled unknowns of `hb`) at `p` stays in the regime where
+        :meth:`linearization` holds."""
+        return True
+
 
 def check_system(system, p) -> None:
     """Check `system` against the contract at parameter `p` (numpy; a few force evaluations).
 
     **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
     first broken rule: ``ndof`` not a positive integer, a mass matrix or force of the wrong shape
-    or not finite, a ``free_mean_dof`` out of range, breakpoints outside [0, 1], or
+    or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
     ``is_linear = True`` with a nonzero nonlinear part.
     """
     if not isinstance(system, PeriodicSystem):
@@ -130,8 +161,8 @@ def check_system(system, p) -> None:
     if k is not None and not (isinstance(k, (int, np.integer)) and 0 <= k < n):
         raise ValueError(f"{name}.free_mean_dof = {k!r}: None or a coordinate index 0 .. {n - 1}")
     bp = np.asarray(system.breakpoints(p, np), dtype=float)
-    if bp.ndim != 1 or np.any((bp < 0) | (bp > 1)):
-        raise ValueError(f"{name}.breakpoints(p) = {bp!r}: a 1-D array of phases in [0, 1]")
+    if bp.ndim != 1 or not np.all(np.isfinite(bp)):
+        raise ValueError(f"{name}.breakpoints(p) = {bp!r}: a 1-D array of finite phases")
     s = np.array([0.1234, 0.5678])
     rng = np.random.default_rng(0)
     q = rng.standard_normal((n, 2)) * float(system.displacement_scale)

@@ -91,10 +91,12 @@ class Arctan(FrictionLaw):
 @register_dataclass
 @dataclass(frozen=True)
 class KelleyLemanski(FrictionLaw):
-    r"""Kelley--Lemanski / Benedict--Kelley empirical law for mixed lubrication (paper Eq. 2).
+    r"""Kelley--Lemanski / Benedict--Kelley empirical law for mixed lubrication.
 
-    $\mu = \mathrm{sgn}(V_s)\,\min(\mu_\mathrm{KL}(|V_s|, V_r, w, \eta_0, R_q), \mu_\mathrm{cap})$;
-    constants, units and sources in ``docs/kelley_lemanski.md``.
+    $\mu = \mathrm{sgn}(V_s)\,\min(\mu_\mathrm{KL}(|V_s|, V_r, w, \eta_0, R_q), \mu_\mathrm{cap})$ with
+    $\mu_\mathrm{KL} = 0.0127\, C_R \log_{10}(C_3 w/(\eta_0 V_s V_r^2))$: the form of the paper's Eq. 2
+    without its curvature factor $(\rho_p+\rho_g)^2$, with Benedict & Kelley's (1961) constants (the
+    paper gives none); constants, units and sources in ``docs/kelley_lemanski.md``.
 
     **Arguments:** `viscosity_Pa_s`: lubricant dynamic viscosity $\eta_0$ [Pa s];
     `roughness_um`: composite RMS surface roughness [um]; `v_reg`: when > 0, ``sgn`` is

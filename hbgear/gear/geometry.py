@@ -17,19 +17,53 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError
 
-__all__ = ["GearPair"]
+__all__ = ["GearPair", "involute", "inverse_involute"]
+
+
+def involute(angle_rad: float) -> float:
+    """``inv(a) = tan(a) - a``."""
+    return math.tan(angle_rad) - angle_rad
+
+
+def inverse_involute(value: float) -> float:
+    """The angle ``a`` in [0, pi/2) with ``tan(a) - a = value`` (``value >= 0``).
+
+    Newton's method on the convex, increasing ``inv`` from ``a0 = (3 value)^(1/3)`` (the
+    leading term of ``inv(a) = a^3/3 + ...``), which overshoots and then decreases
+    monotonically to the root; it stops when a step no longer changes ``a``.
+    """
+    if value == 0.0:
+        return 0.0
+    a = (3.0 * value) ** (1.0 / 3.0)
+    for _ in range(60):
+        step = (involute(a) - value) / math.tan(a) ** 2
+        if not math.isfinite(step) or a - step == a:
+            break
+        a -= step
+    return a
 
 
 @dataclass(frozen=True)
 class GearPair:
-    """External spur-gear pair with a common addendum coefficient.
+    """External spur-gear pair with a common addendum coefficient and optional profile shift.
 
     **Arguments:**
 
     - `teeth_pinion`, `teeth_gear`: tooth counts ``Z_p``, ``Z_g`` [-].
     - `module_m`: module ``m`` [m].
-    - `pressure_angle_rad`: pressure angle ``phi`` [rad].
-    - `addendum_coefficient`: ``h_a`` [-]; addendum radius ``r_a = r + h_a m`` on both gears.
+    - `pressure_angle_rad`: pressure angle ``phi`` of the basic rack [rad].
+    - `addendum_coefficient`: ``h_a`` [-]; addendum radius ``r_a = r + (h_a + x) m``.
+    - `profile_shift_pinion`, `profile_shift_gear`: profile shift coefficients ``x_1``, ``x_2``
+      [-] (default 0).
+    - `working_center_distance_m`: an imposed centre distance ``a_w`` [m]; ``None`` (default)
+      means the zero-backlash distance of the shifted pair, from
+      ``inv(phi_w) = inv(phi) + 2 tan(phi) (x_1 + x_2) / (Z_p + Z_g)``.
+    - `tip_shortening`: shorten both tips by ``k m``, ``k = x_1 + x_2 - y``,
+      ``y = (a_w - a) / m`` (keeps the basic-rack bottom clearance when ``x_1 + x_2 > y``);
+      default ``False``: ``r_a = r + (h_a + x) m``.
+
+    With no shift and no imposed centre distance every quantity is computed exactly as for the
+    unshifted pair (``phi_w = phi``, ``a_w = r_p + r_g``), so results are bit-identical.
     """
 
     teeth_pinion: int
@@ -37,6 +71,10 @@ class GearPair:
     module_m: float
     pressure_angle_rad: float
     addendum_coefficient: float = 1.0
+    profile_shift_pinion: float = 0.0
+    profile_shift_gear: float = 0.0
+    working_center_distance_m: float | None = None
+    tip_shortening: bool = False
 
     # -- radii [m] ------------------------------------------------------------------------
     @property
@@ -56,8 +94,64 @@ class GearPair:
         return self.pitch_radius_gear_m * math.cos(self.pressure_angle_rad)
 
     @property
-    def center_distance_m(self) -> float:
+    def _unshifted(self) -> bool:
+        return (
+            self.profile_shift_pinion == 0.0
+            and self.profile_shift_gear == 0.0
+            and self.working_center_distance_m is None
+        )
+
+    @property
+    def reference_center_distance_m(self) -> float:
+        """``a = (r_p + r_g)``: the centre distance of the unshifted pair."""
         return self.pitch_radius_pinion_m + self.pitch_radius_gear_m
+
+    @property
+    def working_pressure_angle_rad(self) -> float:
+        """``phi_w``: ``cos(phi_w) = a cos(phi) / a_w`` for an imposed ``a_w``, else from
+        ``inv(phi_w) = inv(phi) + 2 tan(phi) (x_1 + x_2) / (Z_p + Z_g)`` (zero backlash)."""
+        phi = self.pressure_angle_rad
+        if self._unshifted:
+            return phi
+        if self.working_center_distance_m is not None:
+            return math.acos(self.reference_center_distance_m * math.cos(phi) / self.working_center_distance_m)
+        shift = self.profile_shift_pinion + self.profile_shift_gear
+        return inverse_involute(involute(phi) + 2 * math.tan(phi) * shift / (self.teeth_pinion + self.teeth_gear))
+
+    @property
+    def center_distance_m(self) -> float:
+        """Working centre distance ``a_w = a cos(phi) / cos(phi_w)`` (``a`` when unshifted)."""
+        if self._unshifted:
+            return self.reference_center_distance_m
+        if self.working_center_distance_m is not None:
+            return self.working_center_distance_m
+        return self.reference_center_distance_m * math.cos(self.pressure_angle_rad) / math.cos(
+            self.working_pressure_angle_rad
+        )
+
+    @property
+    def center_distance_modification(self) -> float:
+        """``y = (a_w - a) / m`` [-]."""
+        return (self.center_distance_m - self.reference_center_distance_m) / self.module_m
+
+    @property
+    def tip_shortening_coefficient(self) -> float:
+        """``k = x_1 + x_2 - y`` when `tip_shortening`, else 0 [-]."""
+        if not self.tip_shortening:
+            return 0.0
+        return self.profile_shift_pinion + self.profile_shift_gear - self.center_distance_modification
+
+    @property
+    def tip_radius_pinion_m(self) -> float:
+        """``r_ap = r_p + (h_a + x_1 - k) m`` (exactly ``r_p + h_a m`` when ``x_1 = k = 0``)."""
+        addendum = self.addendum_coefficient + self.profile_shift_pinion - self.tip_shortening_coefficient
+        return self.pitch_radius_pinion_m + addendum * self.module_m
+
+    @property
+    def tip_radius_gear_m(self) -> float:
+        """``r_ag = r_g + (h_a + x_2 - k) m``."""
+        addendum = self.addendum_coefficient + self.profile_shift_gear - self.tip_shortening_coefficient
+        return self.pitch_radius_gear_m + addendum * self.module_m
 
     @property
     def gear_ratio(self) -> float:
@@ -67,8 +161,8 @@ class GearPair:
     # -- line of action [m] ---------------------------------------------------------------
     @property
     def line_of_action_m(self) -> float:
-        """``L = C sin(phi)``, between the two base-circle tangency points."""
-        return self.center_distance_m * math.sin(self.pressure_angle_rad)
+        """``L = a_w sin(phi_w)``, between the two base-circle tangency points."""
+        return self.center_distance_m * math.sin(self.working_pressure_angle_rad)
 
     @property
     def base_pitch_m(self) -> float:
@@ -78,19 +172,19 @@ class GearPair:
     @property
     def contact_start_m(self) -> float:
         """``x_A = L - sqrt(r_ag^2 - R_bg^2)``: where a pair enters contact."""
-        rag = self.pitch_radius_gear_m + self.addendum_coefficient * self.module_m
+        rag = self.tip_radius_gear_m
         return self.line_of_action_m - math.sqrt(rag**2 - self.base_radius_gear_m**2)
 
     @property
     def contact_end_m(self) -> float:
         """``x_E = sqrt(r_ap^2 - R_bp^2)``: where a pair leaves contact."""
-        rap = self.pitch_radius_pinion_m + self.addendum_coefficient * self.module_m
+        rap = self.tip_radius_pinion_m
         return math.sqrt(rap**2 - self.base_radius_pinion_m**2)
 
     @property
     def pitch_point_m(self) -> float:
-        """``x_P = R_bp tan(phi)``: zero nominal sliding."""
-        return self.base_radius_pinion_m * math.tan(self.pressure_angle_rad)
+        """``x_P = R_bp tan(phi_w)``: zero nominal sliding (the working pitch point)."""
+        return self.base_radius_pinion_m * math.tan(self.working_pressure_angle_rad)
 
     @property
     def contact_ratio(self) -> float:
@@ -129,8 +223,7 @@ class GearPair:
     # -- validation and construction -------------------------------------------------------
     def check(self, key: str = "gear.addendum_coefficient") -> GearPair:
         """Raise :class:`ConfigError` unless the geometry is valid and ``1 < Gamma < 2``."""
-        rag = self.pitch_radius_gear_m + self.addendum_coefficient * self.module_m
-        rap = self.pitch_radius_pinion_m + self.addendum_coefficient * self.module_m
+        rag, rap = self.tip_radius_gear_m, self.tip_radius_pinion_m
         if rag <= self.base_radius_gear_m or rap <= self.base_radius_pinion_m:
             raise ConfigError(key, self.addendum_coefficient, "an addendum beyond the base circles")
         gamma = self.contact_ratio

@@ -15,12 +15,16 @@ $$
 - `S`: average RMS roughness of the two surfaces, `(Rq1 + Rq2)/2` [micro-inch];
 - `log10` is the decimal logarithm.
 
-Kelley & Lemanski (1967), and after them Vaishya & Singh (2003, Eq. 2), write the same law as
-$\mu = C_1 \frac{1}{1 - C_2 R_q}\log_{10}(C_3 w/(\eta_0 V_s V_r^2))$: $C_1 = 0.0127$,
-$C_2 = 1/(50\,\mu\text{in}) = 0.02\,\mu\text{in}^{-1}$ (so $1/(1 - C_2 R_q) \equiv C_R$) and
-$C_3 = 3.17\times10^{8}$ in the units above. (Vaishya & Singh's Eq. 2 also carries a curvature
-factor $(\rho_p+\rho_g)^2$ that we could not check against Kelley & Lemanski's paper. This
-module implements the Benedict–Kelley form that `MODEL.md` §3 names as the basis.)
+**What is, and is not, taken from Vaishya & Singh (2003), Eq. 2.** Their Eq. 2 (after Kelley &
+Lemanski 1967) is $\mu = C_1 \frac{1}{1 - C_2 R_q}\log_{10}\big(C_3 w/(\eta_0 V_s V_r^2
+(\rho_p+\rho_g)^2)\big)$, with empirical $C_1, C_2, C_3$ whose values it does not give. Taken
+from it: the form in $R_q$, $w$ (load per unit length of contact), $\eta_0$, $V_s$ and $V_r$.
+Not taken: the curvature factor $(\rho_p+\rho_g)^2$ (we could not check it against Kelley &
+Lemanski's paper; it is left out, as in Benedict & Kelley's form) and the constants, which are
+Benedict & Kelley's: $C_1 = 0.0127$, $C_2 = 1/(50\,\mu\text{in}) = 0.02\,\mu\text{in}^{-1}$
+(so $1/(1 - C_2 R_q) \equiv C_R$) and $C_3 = 3.17\times10^{8}$ in the units above; this module
+implements the Benedict–Kelley form that `MODEL.md` §3 names as the basis. The cap, the floor
+and the sign (below) are ours.
 
 **SI form, as implemented.** The inputs are SI. They are converted to the original units with
 the named constants below, so the code stays close to the published formula. The equivalent

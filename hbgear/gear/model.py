@@ -33,10 +33,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import jax
 import numpy as np
 from jax.tree_util import register_dataclass
 
 from .friction import FrictionLaw
+
+jax.config.update("jax_enable_x64", True)  # hbgear computes in float64 (see hbgear.engine)
 
 __all__ = ["GearPairModel", "PAIR_SLOTS"]
 

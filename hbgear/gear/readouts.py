@@ -15,13 +15,16 @@ Powers (means over the period, MODEL.md section 4):
   ``<F_mesh delta'>``.
 
 With a single DTE coordinate (torques) the rigid-body speeds are the nominal ones.
+
+:func:`order_amplitudes` reads the spectrum at mesh orders of many points at once straight from
+their harmonic-balance coefficients (no sampling, no FFT): the order tracking of a curve.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["periodic_summary", "SUMMARY_KEYS"]
+__all__ = ["order_amplitudes", "periodic_summary", "SUMMARY_KEYS"]
 
 SUMMARY_KEYS = (
     "dte_mean_um",
@@ -81,3 +84,51 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
         "mean_friction_loss_W": friction_loss,
         "mean_mesh_power_W": mesh_power,
     }
+
+
+def order_amplitudes(coefficients, nu: int, orders, weights=None, rate_weights=None, base_frequency=None) -> np.ndarray:
+    r"""Amplitudes at mesh orders of a linear read-out of many periodic solutions, from their coefficients.
+
+    The read-out is ``x(t) = sum_i w_i q_i(t) + v_i q_i'(t)`` (DTE: ``w = (1, 0, ...)``, ``v = 0``;
+    a bearing force ``k y + c y'``: ``w_y = k``, ``v_y = c``). With ``q_i = a_i0 + sum_k a_ik cos(k tau)
+    + b_ik sin(k tau)`` on the base frequency ``w = w_m / nu``, base harmonic ``k`` is mesh order
+    ``r = k / nu`` and
+
+    ``A_r = |(sum_i w_i a_ik + v_i k w b_ik, sum_i w_i b_ik - v_i k w a_ik)|``, so that
+    ``x = x_0 + sum_r A_r cos(r w_m t + phi_r)``.
+
+    An order that is not a multiple of ``1/nu`` has amplitude 0 exactly (the solution repeats
+    every ``nu`` mesh periods: its spectrum lies on multiples of ``1/nu``).
+
+    **Arguments:** `coefficients`: ``(P, ndof, 2H+1)`` real coefficients [SI] (basis of
+    :mod:`hbgear.engine.fourier`); `nu`; `orders`: mesh orders ``r > 0`` with ``r nu <= H``;
+    `weights` ``w`` ``(ndof,)`` (default: coordinate 0, the DTE); `rate_weights` ``v`` ``(ndof,)``
+    (default none); `base_frequency` ``w`` [rad/s], scalar or ``(P,)``, needed with `rate_weights`.
+
+    **Returns:** ``(P, len(orders))`` amplitudes in the units of ``x``.
+
+    **Raises:** ``ValueError`` for an order ``<= 0`` or above ``H / nu`` (not resolved by the basis).
+    """
+    c = np.asarray(coefficients, dtype=float)
+    harmonics = (c.shape[-1] - 1) // 2
+    orders = np.asarray(orders, dtype=float).ravel()
+    base = orders * nu
+    k = np.rint(base).astype(int)
+    if np.any(orders <= 0) or np.any(base > harmonics + 1e-9):
+        raise ValueError(f"mesh orders {orders.tolist()}: each must lie in (0, H/nu] = (0, {harmonics / nu:g}] "
+                         f"(H = {harmonics}, nu = {nu})")
+    on_grid = np.abs(base - k) <= 1e-9
+    w = np.zeros(c.shape[-2]) if weights is None else np.asarray(weights, dtype=float)
+    if weights is None:
+        w[0] = 1.0
+    a = np.einsum("i,pik->pk", w, c[..., 1::2])  # (P, H): cos coefficients of x, rate terms below
+    b = np.einsum("i,pik->pk", w, c[..., 2::2])
+    if rate_weights is not None:
+        if base_frequency is None:
+            raise ValueError("rate_weights need the base frequency w_m / nu of every point")
+        kw = np.arange(1, harmonics + 1) * np.reshape(np.asarray(base_frequency, dtype=float), (-1, 1))
+        v = np.asarray(rate_weights, dtype=float)
+        va, vb = np.einsum("i,pik->pk", v, c[..., 1::2]), np.einsum("i,pik->pk", v, c[..., 2::2])
+        a, b = a + kw * vb, b - kw * va
+    column = np.clip(k - 1, 0, max(harmonics - 1, 0))
+    return np.where(on_grid, np.hypot(a[:, column], b[:, column]), 0.0)

@@ -86,7 +86,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..errors import ConfigError, ConvergenceError
+from ..errors import ConvergenceError
 from .readouts import periodic_summary
 from ..engine.quadrature import mesh_period_rule
 
@@ -347,14 +347,14 @@ class _Integrator:
 
     def __init__(self, model, omega, *, rtol, atol, method, backend, samples_per_cycle, deflate_soft_mode):
         if method not in _METHODS:
-            raise ConfigError("method", method, f"one of {_METHODS}")
+            raise ValueError(f"method = {method!r}: one of {_METHODS}")
         if backend not in ("jax", "numpy"):
-            raise ConfigError("backend", backend, "'jax' or 'numpy'")
+            raise ValueError(f"backend = {backend!r}: 'jax' or 'numpy'")
         model = _prepared_model(model)
         self.model = model
         self.omega = omega = float(omega)
         _, _, wm = model.speeds(omega)
-        self.tm = tm = 2.0 * math.pi / wm
+        self.tm = 2.0 * math.pi / wm
         self.ndof = ndof = model.ndof
         self.minv = minv = np.linalg.inv(np.asarray(model.mass_matrix(), dtype=float))
         self.u_static = float(model.static_windup(omega))
@@ -523,42 +523,67 @@ def simulate(
 
     **Returns:** a :class:`TimeResponse`.
 
-    **Raises:** :class:`~hbgear.errors.ConfigError` for bad options;
+    **Raises:** ``ValueError`` for bad options;
     :class:`~hbgear.errors.ConvergenceError` when no steady state is reached within
     `max_cycles` (the message gives the speed, the cycles tried and the change reached).
     """
     start_time = time.perf_counter()
     period_cycles = tuple(sorted(set(int(p) for p in period_cycles)))
     if not period_cycles or not set(period_cycles) <= {1, 2}:
-        raise ConfigError("period_cycles", period_cycles, "a subset of (1, 2)")
+        raise ValueError(f"period_cycles = {period_cycles!r}: a subset of (1, 2)")
     if max_cycles < 2:
-        raise ConfigError("max_cycles", max_cycles, "an integer >= 2")
+        raise ValueError(f"max_cycles = {max_cycles!r}: an integer >= 2")
     run = _Integrator(model, omega_pinion, rtol=rtol, atol=atol, method=method, backend=backend,
                       samples_per_cycle=samples_per_cycle, deflate_soft_mode=deflate_soft_mode)
-    model, omega, tm, ndof = run.model, run.omega, run.tm, run.ndof
-    rows = run.tested_rows()
-    keep = max(record_cycles, max(period_cycles), 3)
+    history, found_period, measure = _until_steady(run, initial_state, max_cycles, steady_tolerance, period_cycles,
+                                                   max(record_cycles, max(period_cycles), 3), progress)
+    steady = list(history)[-found_period:]
+    nodes, summary = _steady_summary(run, steady)
+    t_rec, s_rec, q_rec, qd_rec = _recorded(run, list(history)[-min(len(history), max(record_cycles, found_period)):])
+    model, omega = run.model, run.omega
+    return TimeResponse(
+        speed_rpm=omega * 30.0 / math.pi,
+        omega_pinion=omega,
+        mesh_period_s=run.tm,
+        t=t_rec,
+        s=s_rec,
+        q=q_rec,
+        qd=qd_rec,
+        mesh_force=np.asarray(model.mesh_force(s_rec, q_rec, qd_rec, omega)),
+        pairs={k: np.asarray(v) for k, v in model.pair_friction(s_rec, q_rec, qd_rec, omega).items()},
+        summary=summary,
+        period_cycles=found_period,
+        cycles=history[-1].index + 1,
+        steady_measure=measure,
+        nodes=nodes,
+        u_static=run.u_static,
+        method=method,
+        elapsed_s=time.perf_counter() - start_time,
+        friction_law=model.friction,
+        reaction_force_N=steady[-1].reaction,
+    )
+
+
+def _until_steady(run, initial_state, max_cycles, steady_tolerance, period_cycles, keep, progress):
+    """Integrate cycle after cycle until the tested rows repeat with a period of `period_cycles`
+    (:func:`_steady_period` on the last two cycles' changes). **Returns:** ``(history of the last
+    `keep` cycles, the period found, the change measured)``. **Raises:** ConvergenceError after
+    `max_cycles` without one."""
+    rows = list(run.tested_rows())
     history: deque[_Cycle] = deque(maxlen=keep)
     changes: deque = deque(maxlen=2)  # per-cycle (change1, change2)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=max_cycles, desc=f"simulate {omega * 30 / math.pi:.6g} rpm", unit="cycle")
-
-    found_period = None
-    measure = math.inf
-    y, reaction = run.start_state(initial_state), _initial_reaction(model, omega)
+    bar = _cycle_bar(progress, max_cycles, run.omega)
+    found_period, measure = None, math.inf
+    y, reaction = run.start_state(initial_state), _initial_reaction(run.model, run.omega)
     for cycle in range(max_cycles):
         done = run.run_cycle(y, cycle, reaction)
         history.append(done)
-        if bar is not None:
-            bar.update(1)
-        tested = done.node_y[list(rows)]
-        c1 = _relative_change(tested, history[-2].node_y[list(rows)]) if len(history) >= 2 else math.inf
-        c2 = _relative_change(tested, history[-3].node_y[list(rows)]) if len(history) >= 3 else math.inf
+        tested = done.node_y[rows]
+        c1 = _relative_change(tested, history[-2].node_y[rows]) if len(history) >= 2 else math.inf
+        c2 = _relative_change(tested, history[-3].node_y[rows]) if len(history) >= 3 else math.inf
         changes.append((c1, c2))
         if bar is not None:
+            bar.update(1)
             bar.set_postfix(change=f"{min(c1, c2):.2e}")
         if len(changes) == 2:
             found_period = _steady_period(list(changes), steady_tolerance, period_cycles)
@@ -570,58 +595,45 @@ def simulate(
         y, reaction = run.next_start(done)
     if bar is not None:
         bar.close()
-    cycles_done = history[-1].index + 1
     if found_period is None:
         raise ConvergenceError(
-            f"time integration at {omega * 30 / math.pi:.6g} rpm reached no steady state within "
-            f"{cycles_done} mesh cycles: the DTE still changes by {measure:.2e} of its peak-to-peak "
+            f"time integration at {run.omega * 30 / math.pi:.6g} rpm reached no steady state within "
+            f"{history[-1].index + 1} mesh cycles: the DTE still changes by {measure:.2e} of its peak-to-peak "
             f"between periods (tolerance {steady_tolerance:.1e}); raise the mesh damping ratio or "
-            f"[boundary] damping_ratio, or allow more cycles (--cycles / simulate.cycles)"
+            f"the soft output spring's damping ratio, or allow more cycles (max_cycles)"
         )
+    return history, found_period, measure
 
-    # one steady period at the quadrature nodes -> summary (weights sum to 1)
-    steady = list(history)[-found_period:]
-    reaction = steady[-1].reaction
-    s_nodes = np.concatenate([run.node_s] * found_period)
-    w_nodes = np.concatenate([run.node_w / found_period] * found_period)
+
+def _cycle_bar(progress, total, omega):
+    if not progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=f"simulate {omega * 30 / math.pi:.6g} rpm", unit="cycle")
+
+
+def _steady_summary(run, steady):
+    """``(nodes, summary)`` of one steady period (the cycles `steady`) at the quadrature nodes:
+    :func:`~hbgear.gear.readouts.periodic_summary` (weights sum to 1), the LTI impulses' work on the
+    DTE added to ``<F delta'>`` (the quadrature over the smooth segments does not see it)."""
+    period, ndof = len(steady), run.ndof
+    s_nodes = np.concatenate([run.node_s] * period)
+    w_nodes = np.concatenate([run.node_w / period] * period)
     ys = np.concatenate([h.node_y for h in steady], axis=1)
     q_nodes, qd_nodes = ys[:ndof], ys[ndof:]
-    summary = {k: float(v) for k, v in
-               periodic_summary(model, omega, s_nodes, q_nodes, qd_nodes, w_nodes, run.u_static, reaction).items()}
-    # LTI: the impulses c [d_st] of -F_mesh at the stiffness jumps do work on the DTE that the
-    # quadrature over the smooth segments does not see; <F delta'> includes it
-    summary["mean_mesh_power_W"] -= sum(h.kick_work for h in steady) / (found_period * tm)
+    summary = {k: float(v) for k, v in periodic_summary(run.model, run.omega, s_nodes, q_nodes, qd_nodes, w_nodes,
+                                                         run.u_static, steady[-1].reaction).items()}
+    summary["mean_mesh_power_W"] -= sum(h.kick_work for h in steady) / (period * run.tm)
+    return (s_nodes, q_nodes, qd_nodes, w_nodes), summary
 
-    # the recorded cycles on the uniform grid
-    n_rec = min(len(history), max(record_cycles, found_period))
-    rec = list(history)[-n_rec:]
-    t_rec = np.concatenate([(h.index + run.grid_s) * tm for h in rec])
-    s_rec = np.concatenate([run.grid_s] * n_rec)
-    y_rec = np.concatenate([h.grid_y for h in rec], axis=1)
-    q_rec, qd_rec = y_rec[:ndof], y_rec[ndof:]
-    mesh = np.asarray(model.mesh_force(s_rec, q_rec, qd_rec, omega))
-    pairs = {k: np.asarray(v) for k, v in model.pair_friction(s_rec, q_rec, qd_rec, omega).items()}
-    return TimeResponse(
-        speed_rpm=omega * 30.0 / math.pi,
-        omega_pinion=omega,
-        mesh_period_s=tm,
-        t=t_rec,
-        s=s_rec,
-        q=q_rec,
-        qd=qd_rec,
-        mesh_force=mesh,
-        pairs=pairs,
-        summary=summary,
-        period_cycles=found_period,
-        cycles=cycles_done,
-        steady_measure=measure,
-        nodes=(s_nodes, q_nodes, qd_nodes, w_nodes),
-        u_static=run.u_static,
-        method=method,
-        elapsed_s=time.perf_counter() - start_time,
-        friction_law=model.friction,
-        reaction_force_N=reaction,
-    )
+
+def _recorded(run, cycles):
+    """``(t, s, q, q')`` of the recorded `cycles` on the uniform grid."""
+    t_rec = np.concatenate([(h.index + run.grid_s) * run.tm for h in cycles])
+    s_rec = np.concatenate([run.grid_s] * len(cycles))
+    y_rec = np.concatenate([h.grid_y for h in cycles], axis=1)
+    return t_rec, s_rec, y_rec[:run.ndof], y_rec[run.ndof:]
 
 
 @dataclass(frozen=True)
@@ -670,6 +682,21 @@ class MarchRecord:
     friction_law: Any
 
 
+def _march_cycles(run, y, reaction, cycles, first_cycle, max_abs_dte_m):
+    """Integrate `cycles` cycles from ``(y, reaction)``, or until ``|delta|`` exceeds
+    `max_abs_dte_m`. **Returns:** ``(cycles done, their start states, (next state, next output
+    force), stopped early)``."""
+    kept, starts = [], []
+    for k in range(cycles):
+        starts.append(y)
+        done = run.run_cycle(y, first_cycle + k, reaction)
+        kept.append(done)
+        y, reaction = run.next_start(done)
+        if max_abs_dte_m is not None and max(np.max(np.abs(done.node_y[0])), np.max(np.abs(done.grid_y[0]))) > max_abs_dte_m:
+            return kept, starts, (y, reaction), k + 1 < cycles
+    return kept, starts, (y, reaction), False
+
+
 def march(
     model,
     omega_pinion: float,
@@ -705,36 +732,19 @@ def march(
     """
     start_time = time.perf_counter()
     if int(cycles) < 1:
-        raise ConfigError("cycles", cycles, "an integer >= 1")
-    cycles = int(cycles)
+        raise ValueError(f"cycles = {cycles!r}: an integer >= 1")
     run = _Integrator(model, omega_pinion, rtol=rtol, atol=atol, method=method, backend=backend,
                       samples_per_cycle=samples_per_cycle, deflate_soft_mode=deflate_soft_mode)
-    model, ndof = run.model, run.ndof
-    kept: list[_Cycle] = []
-    starts = []
-    stopped = False
-    y = run.start_state(initial_state)
-    reaction = _initial_reaction(model, run.omega) if reaction_N is None else float(reaction_N)
-    for k in range(cycles):
-        starts.append(y)
-        done = run.run_cycle(y, first_cycle + k, reaction)
-        kept.append(done)
-        y, reaction = run.next_start(done)
-        if max_abs_dte_m is not None and max(np.max(np.abs(done.node_y[0])), np.max(np.abs(done.grid_y[0]))) > max_abs_dte_m:
-            stopped = k + 1 < cycles
-            break
-    final_state, final_reaction = y, reaction
+    model, ndof, omega = run.model, run.ndof, run.omega
+    reaction = _initial_reaction(model, omega) if reaction_N is None else float(reaction_N)
+    kept, starts, (final_state, final_reaction), stopped = _march_cycles(
+        run, run.start_state(initial_state), reaction, int(cycles), first_cycle, max_abs_dte_m)
     delta_nodes = np.stack([c.node_y[0] for c in kept])
-    delta_grid = np.stack([c.grid_y[0] for c in kept])
     mean = delta_nodes @ run.node_w
     rms = np.sqrt(((delta_nodes - mean[:, None]) ** 2) @ run.node_w)
-    both = np.concatenate([delta_nodes, delta_grid], axis=1)
+    both = np.concatenate([delta_nodes, np.stack([c.grid_y[0] for c in kept])], axis=1)
     grid_y = np.stack([c.grid_y for c in kept])
-    omega = run.omega
-    last = kept[-1]
-    last_summary = {k: float(v) for k, v in periodic_summary(
-        model, omega, run.node_s, last.node_y[:ndof], last.node_y[ndof:], run.node_w, run.u_static, last.reaction).items()}
-    last_summary["mean_mesh_power_W"] -= last.kick_work / run.tm  # LTI impulses, as in simulate
+    _, last_summary = _steady_summary(run, kept[-1:])  # means over the last cycle (LTI impulses as in simulate)
     return MarchRecord(
         speed_rpm=omega * 30.0 / math.pi,
         omega_pinion=omega,

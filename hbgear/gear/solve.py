@@ -15,15 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
-import jax.numpy as jnp
 import numpy as np
 
 from ..engine import fourier
 from ..errors import ConvergenceError
 from ..engine.hb import HarmonicBalance, _breakpoint_key
+from ..engine.response import PeriodicSolution as EnginePeriodicSolution
+from ..engine.response import newton_solve, synthesize
 from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
-from ..engine.newton import newton
 from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
 from .system import GearSystem
 
@@ -39,49 +39,36 @@ def rad_s_to_rpm(omega):
 
 
 @dataclass(frozen=True)
-class PeriodicSolution:
-    """A converged harmonic-balance solution.
+class PeriodicSolution(EnginePeriodicSolution):
+    """A converged harmonic-balance solution of the gear pair (an engine
+    :class:`~hbgear.engine.response.PeriodicSolution` of a :class:`~hbgear.gear.system.GearSystem`).
 
-    **Fields:** `model`; `omega_pinion` [rad/s]; `harmonics` ``H``; `nu`; `samples` ``N``;
-    `coefficients` [m], shape ``(ndof, 2H+1)`` (real basis of :mod:`hbgear.engine.fourier` on the base
-    frequency ``w_m/nu``); `reaction_force_N` (``T_g/R_bg`` for the reaction boundary);
-    `u_static_m`; `residual_norm` (scaled by the static load); `iterations`; `z` (scaled
-    unknowns, for continuation).
+    **Fields** (besides the engine's `system`, `parameter`, `harmonics`, `nu`, `samples`, `z`,
+    `residual_norm`, `iterations`, `multipliers`): `u_static_m`, the soft spring's static wind-up.
+
+    **Derived:** `model`; `omega_pinion` [rad/s]; `speed_rpm`; `coefficients` [m], shape
+    ``(ndof, 2H+1)`` (real basis of :mod:`hbgear.engine.fourier` on the base frequency ``w_m/nu``);
+    `reaction_force_N` (``T_g/R_bg`` for the reaction boundary); :meth:`summary` (the INTERFACE
+    read-outs), :meth:`harmonic_table`.
     """
 
-    model: GearPairModel
-    omega_pinion: float
-    harmonics: int
-    nu: int
-    samples: int
-    coefficients: np.ndarray
-    reaction_force_N: float
-    u_static_m: float
-    residual_norm: float
-    iterations: int
-    z: np.ndarray
+    u_static_m: float = 0.0
+
+    @property
+    def model(self) -> GearPairModel:
+        return self.system._at(self.parameter)[0]
+
+    @property
+    def omega_pinion(self) -> float:
+        return float(self.system._at(self.parameter)[1])
+
+    @property
+    def reaction_force_N(self) -> float:
+        return self.extra
 
     @property
     def speed_rpm(self) -> float:
         return rad_s_to_rpm(self.omega_pinion)
-
-    @property
-    def base_frequency(self) -> float:
-        return self.model.speeds(self.omega_pinion)[2] / self.nu
-
-    def state_at(self, base_fraction):
-        """``(q, qd)`` at fractions of the base period, shapes ``(ndof, n)``."""
-        tau = 2 * np.pi * np.asarray(base_fraction, dtype=float)
-        k = np.arange(1, self.harmonics + 1)
-        return _synthesize(self.coefficients, self.base_frequency, np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
-
-    def state_on_grid(self, points: int):
-        """``(q, qd)`` at the base-period fractions ``j / points``, ``j < points``, shapes
-        ``(ndof, points)``: :meth:`state_at` on a uniform grid by FFT (``points >= 2H + 2``)."""
-        if points < 2 * self.harmonics + 2:
-            return self.state_at(np.arange(points) / points)
-        velocity = fourier.differentiate(self.coefficients, self.harmonics, self.base_frequency)
-        return tuple(fourier.synthesize(c, self.harmonics, points) for c in (self.coefficients, velocity))
 
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
@@ -90,29 +77,22 @@ class PeriodicSolution:
         return base, s, w
 
     def summary(self) -> dict:
-        """The INTERFACE read-outs (µm, W) from exact quadrature over the period."""
+        """The INTERFACE read-outs (µm, W) from exact quadrature over the period; with the Floquet
+        multipliers, also ``max_abs_floquet``."""
         out = _summaries(self.model, np.array([self.omega_pinion]), self.coefficients[None], self.harmonics, self.nu,
                          np.array([self.u_static_m]), np.array([self.reaction_force_N]))
-        return {k: float(v[0]) for k, v in out.items()}
+        out = {k: float(v[0]) for k, v in out.items()}
+        if self.multipliers is not None:
+            m = np.asarray(self.multipliers)
+            out["max_abs_floquet"] = float(np.max(np.abs(m))) if m.size else 0.0
+        return out
 
     @classmethod
-    def from_z(cls, model, omega_pinion, z, hb, *, residual_norm=0.0, iterations=0) -> PeriodicSolution:
+    def from_z(cls, model, omega_pinion, z, hb, *, residual_norm=0.0, iterations=0, multipliers=None) -> PeriodicSolution:
         """The solution of scaled unknowns `z` of the discretisation `hb` (reaction slot decoded)."""
-        coefficients, reaction = _decode(model, z, hb)
-        u_static = float(model.static_windup(omega_pinion))
-        return cls(
-            model=model,
-            omega_pinion=float(omega_pinion),
-            harmonics=hb.harmonics,
-            nu=hb.nu,
-            samples=hb.samples,
-            coefficients=coefficients,
-            reaction_force_N=float(reaction),
-            u_static_m=u_static,
-            residual_norm=float(residual_norm),
-            iterations=int(iterations),
-            z=z,
-        )
+        return cls(system=GearSystem(model), parameter=float(omega_pinion), harmonics=hb.harmonics, nu=hb.nu,
+                   samples=hb.samples, z=np.asarray(z), residual_norm=float(residual_norm), iterations=int(iterations),
+                   multipliers=multipliers, u_static_m=float(model.static_windup(omega_pinion)))
 
     def harmonic_table(self):
         """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
@@ -125,29 +105,10 @@ class PeriodicSolution:
 def _decode(model: GearPairModel, z, hb: HarmonicBalance):
     """Scaled unknowns ``z`` ``(..., size)`` -> coefficients [m] ``(..., ndof, 2H+1)`` and the
     reaction force ``T_g/R_bg`` [N] ``(...)`` (its slot, the mean of ``u``, is zeroed)."""
-    system = GearSystem(model)
-    z = np.asarray(z, dtype=float)
-    x = z * float(system.displacement_scale)
-    reaction = np.zeros(z.shape[:-1])
-    if system.free_mean_dof is not None:
-        slot = system.free_mean_dof * hb.block
-        reaction = z[..., slot] * float(system.force_scale)
-        x = x.copy()
-        x[..., slot] = 0.0
-    return x.reshape(z.shape[:-1] + (model.ndof, hb.block)), reaction
+    return hb.decode(GearSystem(model), z)
 
 
-def _synthesize(coefficients, base_frequency, cos, sin):
-    """``(q, qd)`` at the points of the basis ``cos, sin`` ``(H, n)`` from coefficients
-    ``(..., ndof, 2H+1)``: shapes ``(..., ndof, n)``; `base_frequency` broadcasts against them."""
-    k = np.arange(1, cos.shape[0] + 1)
-    c = np.asarray(coefficients, dtype=float)
-    flat = c.reshape(-1, c.shape[-1])  # one matrix product for all points and coordinates
-    a, b = flat[:, 1::2], flat[:, 2::2]
-    basis = np.concatenate([cos, sin])
-    q = flat[:, :1] + np.concatenate([a, b], axis=1) @ basis
-    qd = np.concatenate([b * k, -a * k], axis=1) @ basis
-    return q.reshape(c.shape[:-1] + (-1,)), base_frequency * qd.reshape(c.shape[:-1] + (-1,))
+_synthesize = synthesize
 
 
 def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
@@ -223,20 +184,7 @@ def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
 
 
 def _newton(hb, system, omega, z0, tolerance, max_iterations):
-    # dense path: (R, dR/dz, dR/dp), the evaluation continuation uses, with dR/dp dropped (a start
-    # solution followed by a curve then traces and compiles one Jacobian function, not two);
-    # structured path (many harmonics, the engine decides by size): the matrix-free linearisation
-    prepared = hb.prepare(system)
-
-    def both(z):
-        return hb.residual_and_linearization(jnp.asarray(z), omega, system, prepared)
-
-    def resid(z):
-        return hb.residual(jnp.asarray(z), omega, system, prepared)
-
-    # a linear model is one step: its Krylov solve goes to the tolerance at once
-    linear_rtol = 0.1 * tolerance if system.is_linear else None
-    return newton(both, resid, z0, tolerance=tolerance, max_iterations=max_iterations, linear_rtol=linear_rtol)
+    return newton_solve(hb, system, omega, z0, tolerance=tolerance, max_iterations=max_iterations)
 
 
 def _steps(result) -> str:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from jax.tree_util import register_dataclass
 
+from ..engine.fourier import basis_size
 from ..engine.system import PeriodicSystem
 from .model import GearPairModel
 
@@ -89,6 +90,47 @@ class GearSystem(PeriodicSystem):
         between the breakpoints (``k(t)`` a rectangular pulse, friction an excitation)."""
         m = self.model
         return m.is_linear and (m.coupling == "LTI" or (m.coupling == "LTV" and m.formulation == "A"))
+
+    def frequency_scale(self, p):
+        """``w_n = sqrt(k_mean / m_e)`` [rad/s] of the model at `p`."""
+        model, _ = self._at(p)
+        return float(np.sqrt(float(model.k_mean_N_per_m) / float(model.mass_equivalent_kg)))
+
+    def neutral_multipliers(self, p, nu: int = 1):
+        """The spring boundary's undamped soft mode ``exp(+-i w_b T)`` (:mod:`hbgear.gear.soft_mode`)."""
+        from .soft_mode import soft_mode_estimate
+
+        model, omega = self._at(p)
+        omega = np.broadcast_to(np.asarray(omega, dtype=float), np.shape(p))
+        return soft_mode_estimate(model, omega, nu)
+
+    def linearization(self):
+        """The linear model itself, or for a backlash model (otherwise linear) the same model with
+        teeth that never separate: ``g(x)`` has slope 1 outside the dead zone, so along a solution
+        that keeps contact the linearisation is exactly that model's."""
+        if self.model.is_linear:
+            return self
+        if self.model.contact == "backlash":
+            linear = self.model.replace(contact="linear")
+            if linear.is_linear:
+                return GearSystem(linear, self.omega_pinion, self.parameter)
+        return None
+
+    def in_linear_regime(self, hb, z, p) -> bool:
+        """True unless the model has backlash and the solution enters the dead zone: ``|delta -
+        eps| > b`` on a dense grid (8 samples per harmonic, at least 1024 per base period) with a
+        margin of 1e-3 of its peak-to-peak for the values between the samples."""
+        model, omega = self._at(p)
+        if model.contact != "backlash":
+            return True
+        x = np.asarray(z, dtype=float).reshape(model.ndof, basis_size(hb.harmonics))[0] * float(self.displacement_scale)
+        f = np.linspace(0.0, 1.0, max(1024, 8 * hb.harmonics * hb.nu), endpoint=False)
+        k = np.arange(1, hb.harmonics + 1)
+        angle = 2 * np.pi * np.outer(f, k)
+        delta = x[0] + np.cos(angle) @ x[1::2] + np.sin(angle) @ x[2::2]
+        eps, _ = model.static_transmission_error((f * hb.nu) % 1.0, model.speeds(float(omega))[2], np)
+        gap = delta - np.asarray(eps)
+        return bool(np.min(np.abs(gap)) - 0.5 * model.backlash_m > 1e-3 * float(np.ptp(gap)) + 1e-15)
 
     @property
     def displacement_scale(self):

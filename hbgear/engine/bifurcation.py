@@ -1,0 +1,336 @@
+r"""Period doubling: locate the -1 crossing on a branch, switch to the ``nu = 2`` branch, follow it.
+
+Where a real Floquet multiplier of a ``nu = 1`` solution leaves the unit circle through -1, the
+period-doubled branch is born (MODEL.md section 6). In the ``nu = 2`` basis (base frequency
+``w_exc / 2``) the ``nu = 1`` solution is embedded exactly (harmonic ``k`` -> base index ``2k``,
+:func:`embed_subharmonic`); all coefficients of the linearisation there are periodic in the
+excitation period, so the ``nu = 2`` Jacobian splits into an even block and an odd block (half
+orders), and the Floquet eigenfunction of the multiplier -1 is the null vector of the odd block
+(:func:`half_order_mode`).
+
+- :func:`locate_period_doubling` -- the one locator: the crossing between two branch points, by
+  Illinois regula falsi on ``mu + 1`` of the most negative real multiplier from exact or
+  variational monodromy (:func:`exact_negative_multiplier`); where that needs the variational
+  equations, Hill's multipliers (cheap) bracket it first and the exact ones confirm and refine.
+- :func:`follow_period_doubled` -- the one follower: continuation in the half-order amplitude
+  ``a = phi . (z - z_*)`` with the parameter as an unknown (regular at the bifurcation whether the
+  branch is vertical, super- or subcritical), then an arclength leg in the parameter that stops
+  exactly at the end of the range.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from .continuation import PseudoArclength, Status, continuation, illinois, sweep_method
+from .floquet import hill_multipliers, most_negative_real
+from .hb import HarmonicBalance, residual_functions
+from .monodromy import monodromy_variational, multipliers_linear, state_synthesis
+
+__all__ = [
+    "PeriodDoublingPoint",
+    "DoubledBranch",
+    "amplitude_residuals",
+    "embed_subharmonic",
+    "exact_negative_multiplier",
+    "follow_period_doubled",
+    "half_order_indices",
+    "half_order_mode",
+    "half_order_share",
+    "locate_period_doubling",
+]
+
+
+def embed_subharmonic(z, ndof: int, harmonics: int, harmonics_to: int | None = None, factor: int = 2) -> np.ndarray:
+    """The same waveform in a basis on ``1/factor`` of the base frequency.
+
+    Per coordinate ``[a_0, a_1, b_1, ..., a_H, b_H]`` on ``w`` -> ``[a_0, ..., a_H2, b_H2]`` on
+    ``w / factor``: harmonic ``k`` goes to index ``factor k``, the others are zero. Exact (the
+    waveform is unchanged) when ``harmonics_to >= factor * harmonics`` (the default); harmonics
+    above ``harmonics_to`` are dropped otherwise. Works on scaled unknowns ``z`` (the mean slot,
+    which may hold a free coordinate's force unknown, is carried over as it is).
+
+    **Arguments:** `z`: shape ``(ndof * (2H+1),)``; `ndof`; `harmonics` ``H``; `harmonics_to`
+    ``H2`` (default ``factor H``); `factor`: ``nu_to / nu_from`` (2 for ``nu = 1 -> 2``).
+
+    **Returns:** shape ``(ndof * (2 H2 + 1),)``.
+    """
+    if factor < 1:
+        raise ValueError(f"factor must be >= 1, got {factor}")
+    h2 = factor * harmonics if harmonics_to is None else int(harmonics_to)
+    src = np.asarray(z, dtype=float).reshape(ndof, 2 * harmonics + 1)
+    out = np.zeros((ndof, 2 * h2 + 1))
+    out[:, 0] = src[:, 0]
+    k = np.arange(1, harmonics + 1)
+    m = factor * k
+    keep = m <= h2
+    out[:, 2 * m[keep] - 1] = src[:, 2 * k[keep] - 1]
+    out[:, 2 * m[keep]] = src[:, 2 * k[keep]]
+    return out.ravel()
+
+
+def half_order_indices(ndof: int, harmonics: int) -> np.ndarray:
+    """Positions of the odd base harmonics (half orders for ``nu = 2``) in ``z``."""
+    block = 2 * harmonics + 1
+    odd = np.arange(1, harmonics + 1, 2)
+    per = np.sort(np.concatenate([2 * odd - 1, 2 * odd]))
+    return (np.arange(ndof)[:, None] * block + per[None]).ravel()
+
+
+def half_order_share(z, ndof: int, harmonics: int) -> float:
+    """RMS of the half-order harmonics of coordinate 0 over the RMS of all its harmonics (``nu = 2`` ``z``)."""
+    x = np.asarray(z, dtype=float).reshape(ndof, 2 * harmonics + 1)[0, 1:]
+    odd = half_order_indices(1, harmonics) - 1
+    total = float(np.sqrt(np.sum(x**2)))
+    return float(np.sqrt(np.sum(x[odd] ** 2))) / total if total > 0 else 0.0
+
+
+def half_order_mode(hb2: HarmonicBalance, z2, p: float, system) -> tuple[np.ndarray, float]:
+    """The half-order (period-doubling) Floquet mode at an embedded ``nu = 1`` solution.
+
+    The ``nu = 2`` Jacobian at a solution periodic in the excitation period maps half orders to
+    half orders; its odd block is singular exactly where a multiplier (per excitation period) is
+    -1, and its null vector is the Fourier series of that Floquet eigenfunction. Away from the
+    crossing the smallest right singular vector is returned.
+
+    **Returns:** ``(phi, sigma)``: unit vector of size ``hb2.size`` (zero on the whole orders),
+    and the smallest singular value of the odd block relative to its largest.
+    """
+    if hb2.nu != 2:
+        raise ValueError(f"half_order_mode needs a nu = 2 discretisation, got nu = {hb2.nu}")
+    _, jac = hb2.residual_and_jacobian(jnp.asarray(z2), float(p), system)
+    idx = half_order_indices(hb2.ndof, hb2.harmonics)
+    _, s, vt = np.linalg.svd(np.asarray(jac, dtype=float)[np.ix_(idx, idx)])
+    phi = np.zeros(hb2.size)
+    phi[idx] = vt[-1]
+    if phi[np.argmax(np.abs(phi))] < 0:  # a sign convention: the largest component positive
+        phi = -phi
+    return phi, float(s[-1] / s[0])
+
+
+def amplitude_residuals(hb2, system, p_star: float, phi, offset: float):
+    """Residuals for continuing a ``nu = 2`` branch in its half-order amplitude ``a``.
+
+    Unknowns ``y = (z, p / p_star)``; equations ``R(z; p) = 0`` and ``phi . z - offset = a``.
+    **Returns:** ``(both, resid)``: ``(y, a) -> (R, dR/dy, dR/da)`` and ``(y, a) -> R``.
+    """
+
+    def both(y, a):
+        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(y[:-1]), float(y[-1] * p_star), system)
+        r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+        top = np.hstack([np.asarray(jz, dtype=float), p_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
+        jpar = np.zeros(len(r))
+        jpar[-1] = -1.0
+        return r, np.vstack([top, np.append(phi, 0.0)]), jpar
+
+    def resid(y, a):
+        r = hb2.residual(jnp.asarray(y[:-1]), float(y[-1] * p_star), system)
+        return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+
+    return both, resid
+
+
+# ============================================================================ locating the crossing
+
+
+class PeriodDoublingPoint(NamedTuple):
+    """A located period doubling: the parameter `p`, the ``nu = 1`` unknowns `z` there (of the
+    branch's discretisation), the real multiplier nearest -1 (per excitation period) and the
+    parameter bracket ``(p_a, p_b)`` it was found in."""
+
+    p: float
+    z: np.ndarray
+    multiplier: float
+    bracket: tuple
+
+
+def exact_negative_multiplier(system, hb: HarmonicBalance, z, p) -> float:
+    """The most negative real Floquet multiplier per excitation period of the ``nu = 1`` solution
+    `z` at `p` (``nan`` if none): exact monodromy where the system's linearization holds along it,
+    the variational equations otherwise. Hill's method is not used here: with a few harmonics
+    its selection of a real negative multiplier (exponents at half-integer harmonic centres) is
+    not reliable enough to bracket the crossing."""
+    if hb.nu != 1:
+        raise ValueError("exact_negative_multiplier needs a nu = 1 solution")
+    linear = system.linearization()
+    if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):
+        return most_negative_real(multipliers_linear(linear, float(p)))
+    coefficients, _ = hb.decode(system, z)
+    state = state_synthesis(coefficients, hb.harmonics, float(hb.base_frequency(system, p)))
+    return most_negative_real(np.linalg.eigvals(monodromy_variational(system, float(p), state, 1)))
+
+
+#: Smallest first step (relative) from Hill's crossing towards the exact one (:func:`_exact_bracket`).
+HILL_MIN_STEP = 1e-6
+
+
+def _exact_bracket(g, w0, slope, pa, pb):
+    """``(a, g(a)..., b, g(b)...)`` with a sign change of the exact ``g``, from Hill's crossing
+    `w0`: the next point is the exact crossing predicted with Hill's `slope`, overshot by half
+    (at least ``HILL_MIN_STEP`` away), then steps four times longer until the sign changes;
+    ``None`` at the end of the segment ``[pa, pb]`` without one."""
+    low, high = min(pa, pb), max(pa, pb)
+    g0, d0 = g(w0)
+    if g0 == 0:
+        return w0, g0, d0, w0, g0, d0
+    step = -1.5 * g0 / slope if slope != 0 and np.isfinite(slope) else 0.0
+    step = math.copysign(max(abs(step), HILL_MIN_STEP * abs(w0)), step)
+    while True:
+        w1 = min(max(w0 + step, low), high)
+        g1, d1 = g(w1)
+        if g0 * g1 <= 0:
+            return w0, g0, d0, w1, g1, d1
+        if w1 in (low, high):
+            return None
+        step *= 4.0
+
+
+def _hill_crossing(system, hb, solve, pa, pb, tolerance, max_steps):
+    """``(p, slope)``: the -1 crossing of Hill's most negative real multiplier between `pa` and
+    `pb` (to `tolerance` relative) and the slope of its ``mu + 1`` over the segment, or ``None``
+    when Hill's multipliers do not bracket a crossing there (or fail)."""
+
+    def g(w):
+        mu = most_negative_real(hill_multipliers(hb, solve(w), w, system))
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), None
+
+    try:
+        (ga, _), (gb, _) = g(pa), g(pb)
+        if ga * gb > 0:
+            return None
+        (w, _, _), _ = illinois(g, pa, ga, pb, gb, (pa, None, ga), tolerance, max_steps)
+    except Exception:  # noqa: BLE001 -- Hill only starts the search; the exact multipliers decide
+        return None
+    return w, (gb - ga) / (pb - pa)
+
+
+def locate_period_doubling(system, hb: HarmonicBalance, solve: Callable, pa: float, za, pb: float, zb, *,
+                           tolerance: float = 1e-7, max_steps: int = 40):
+    """The -1 crossing between branch points ``(pa, za)`` and ``(pb, zb)`` (``nu = 1`` unknowns of `hb`).
+
+    Illinois regula falsi on ``mu + 1`` (:func:`exact_negative_multiplier`) in the parameter, to
+    `tolerance` relative; `solve(p, z0) -> z` converges a ``nu = 1`` solution at `p` from `z0`
+    (started from the straight line between the two points, so it stays on this branch even where
+    the curve is multivalued). Where the multiplier needs the variational equations (~0.15 s an
+    evaluation for the gear pair) the crossing of Hill's multipliers (~10 ms) is located first;
+    the exact multiplier there and Hill's slope give the next point, stepped out until the exact
+    multipliers change sign; they then locate the crossing. Hill's crossing is off the exact one
+    by its truncation and sampling error (2e-6 relative at H = 32, N = 1024 on the NLTV gear pair;
+    4e-5 at N = 256). Without that bracket the whole segment is searched with the exact multipliers.
+
+    **Returns:** ``(PeriodDoublingPoint, None)`` or ``(None, reason)`` when the exact multipliers
+    do not confirm a crossing between the points.
+    """
+    za, zb = np.asarray(za, dtype=float), np.asarray(zb, dtype=float)
+
+    def solve_on_segment(w):
+        t = 0.0 if pb == pa else (w - pa) / (pb - pa)
+        return solve(w, (1 - t) * za + t * zb)
+
+    def g(w):
+        z = solve_on_segment(w)
+        mu = exact_negative_multiplier(system, hb, z, w)
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), (z, mu)
+
+    bracket = None
+    if system.linearization() is None:
+        hill = _hill_crossing(system, hb, solve_on_segment, pa, pb, tolerance * 10, max_steps)
+        if hill is not None:
+            try:
+                bracket = _exact_bracket(g, *hill, pa, pb)
+            except Exception:  # noqa: BLE001 -- a solve that fails near Hill's crossing: the whole segment
+                bracket = None
+    if bracket is None:
+        bracket = (pa, *g(pa), pb, *g(pb))
+    lo, ga, da, hi, gb, db = bracket
+    if ga * gb > 0:
+        return None, (f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the exact/variational "
+                      f"monodromy does not confirm (most negative real multipliers {da[1]:.6g}, {db[1]:.6g})")
+    (w, (z, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
+                                  tolerance, max_steps)
+    return PeriodDoublingPoint(float(w), z, float(mu), (float(pa), float(pb))), None
+
+
+# ============================================================================ following the nu = 2 branch
+
+
+class DoubledBranch(NamedTuple):
+    """A followed ``nu = 2`` branch, in path order from the bifurcation: parameter `p` (n,),
+    unknowns `z` (n, size) of `hb` (the ``nu = 2`` discretisation), `residual` (n,), `amplitude`
+    (n,) the half-order amplitude ``phi . (z - z_*)``, `status` (``"reached range end"``,
+    ``"reconnected"``, ``"max amplitude"`` or ``"failed"``), `message`, `mode` ``phi``."""
+
+    p: np.ndarray
+    z: np.ndarray
+    residual: np.ndarray
+    amplitude: np.ndarray
+    hb: HarmonicBalance
+    status: str
+    message: str
+    mode: np.ndarray
+
+
+def _end_leg(hb2, system, z, p, end, p_star, tolerance, max_points):
+    """The arclength leg in the parameter from ``(p, z)`` that stops exactly at `end`."""
+    both, resid, fixed = residual_functions(hb2, system)
+    return continuation(both, resid, z, float(p), end, sweep_method(p_star, end), max_points=max_points,
+                        tolerance=tolerance, args=fixed)
+
+
+def follow_period_doubled(system, point: PeriodDoublingPoint, harmonics: int, p_lo: float, p_hi: float, *,
+                          harmonics2: int | None = None, samples2: int | None = None, tolerance: float = 1e-9,
+                          max_points: int = 400, amplitude: float = 0.02, max_amplitude: float = 100.0,
+                          progress=None) -> DoubledBranch:
+    r"""Follow the ``nu = 2`` branch born at `point` while its parameter stays in ``[p_lo, p_hi]``.
+
+    Continuation in the half-order amplitude ``a = phi . (z - z_*)`` with the parameter as an
+    unknown, ``R_2(z, p) = 0``, ``phi . (z - z_*) = a``, from `amplitude` up to `max_amplitude`
+    (in the system's scaled units). It ends: ``"reached range end"`` (the parameter left the range;
+    the last leg is an arclength continuation in the parameter that stops exactly at that end),
+    ``"reconnected"`` (the amplitude went back to zero: the branch rejoins the ``nu = 1`` curve at
+    another period doubling), ``"max amplitude"`` (an unbounded branch?) or ``"failed"``.
+
+    **Arguments:** `harmonics`: ``H`` of the ``nu = 1`` unknowns ``point.z``; `harmonics2`: of
+    the ``nu = 2`` basis (default ``2 H``); `samples2`: its AFT samples (default
+    ``max(256, 8 H2)``, even).
+    """
+    h2 = 2 * harmonics if harmonics2 is None else int(harmonics2)
+    samples2 = samples2 or max(256, 8 * h2)
+    hb2 = HarmonicBalance(system.ndof, h2, 2, samples2 + samples2 % 2)
+    z_star = embed_subharmonic(point.z, system.ndof, harmonics, h2)
+    p_star = float(point.p)
+    phi, _ = half_order_mode(hb2, z_star, p_star, system)
+    offset = float(phi @ z_star)
+    both, resid = amplitude_residuals(hb2, system, p_star, phi, offset)
+    method = PseudoArclength(ds=0.02, ds_min=1e-8, ds_max=0.25, max_angle_deg=5.0, parameter_scale=max_amplitude)
+    leg = continuation(both, resid, np.append(z_star + amplitude * phi, 1.0), amplitude, max_amplitude, method,
+                       max_points=max_points, tolerance=tolerance, progress=progress,
+                       callback=lambda a, y: not p_lo <= float(y[-1]) * p_star <= p_hi)
+    ps = np.asarray(leg.z)[:, -1] * p_star if len(leg) else np.zeros(0)
+    zs = np.asarray(leg.z)[:, :-1] if len(leg) else np.zeros((0, hb2.size))
+    res = np.asarray(leg.residual)
+
+    def result(ps, zs, res, status, message):
+        return DoubledBranch(ps, zs, res, zs @ phi - offset if len(zs) else np.zeros(0), hb2, status, message, phi)
+
+    if leg.status == Status.STOPPED and len(ps) >= 2:
+        end = p_lo if ps[-1] < p_lo else p_hi
+        k = len(ps) - 2  # the last point inside the range
+        last = _end_leg(hb2, system, zs[k], ps[k], end, p_star, tolerance, max_points)
+        ps = np.concatenate([ps[: k + 1], np.asarray(last.p)[1:]])
+        zs = np.concatenate([zs[: k + 1], np.asarray(last.z)[1:]])
+        res = np.concatenate([res[: k + 1], np.asarray(last.residual)[1:]])
+        if last.success:
+            return result(ps, zs, res, "reached range end", f"reached p = {end:.9g}")
+        return result(ps, zs, res, "failed", f"last leg towards p = {end:.9g} stopped at p = {ps[-1]:.9g}: {last.message}")
+    if leg.status == Status.TURNED_BACK:
+        return result(ps, zs, res, "reconnected", f"the half-order amplitude went back to zero near p = {ps[-1]:.9g}: "
+                      "the branch rejoins the nu = 1 curve there")
+    if leg.status == Status.SUCCESS:
+        return result(ps, zs, res, "max amplitude", f"half-order amplitude reached {max_amplitude:g} at p = {ps[-1]:.9g} "
+                      "without leaving the range (unbounded branch?)")
+    return result(ps, zs, res, "failed", f"{leg.status.name}: {leg.message}")

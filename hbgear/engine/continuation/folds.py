@@ -1,0 +1,78 @@
+"""Fold location (Illinois regula falsi on the tangent's ``p``-component) and the
+:class:`IllinoisBracket` / :func:`illinois` root bracketing it uses (also used by the gear
+pair's period-doubling search)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from .corrector import _Point
+
+__all__ = ["IllinoisBracket", "illinois"]
+
+
+class IllinoisBracket(NamedTuple):
+    """A sign-changing bracket ``f(a) f(b) <= 0`` narrowed by Illinois regula falsi.
+
+    :meth:`point` is the next evaluation point; :meth:`narrowed` keeps the sub-bracket that
+    still changes sign and halves the stale end's value when the same end is kept twice.
+    """
+
+    a: float
+    fa: float
+    b: float
+    fb: float
+    side: int = 0
+
+    def point(self) -> float:
+        return (self.a * self.fb - self.b * self.fa) / (self.fb - self.fa)
+
+    def narrowed(self, c: float, fc: float) -> IllinoisBracket:
+        if fc * self.fa > 0:
+            return IllinoisBracket(c, fc, self.b, self.fb * 0.5 if self.side == -1 else self.fb, -1)
+        return IllinoisBracket(self.a, self.fa * 0.5 if self.side == 1 else self.fa, c, fc, 1)
+
+
+def illinois(g, a, ga, b, gb, best, rel_tol, max_steps):
+    """Illinois regula falsi on ``g(x) -> (value, data)`` from the bracket ``(a, ga), (b, gb)``
+    until it is below `rel_tol` (relative to ``max(|a|, |b|)``) or a value is 0.
+
+    **Returns:** the best ``(x, data, value)`` seen (`best`: the better end's, same form) and
+    the last :class:`IllinoisBracket`.
+    """
+    bracket = IllinoisBracket(a, ga, b, gb)
+    for _ in range(max_steps):
+        if abs(bracket.b - bracket.a) <= rel_tol * max(abs(bracket.a), abs(bracket.b)) or best[2] == 0:
+            break
+        c = bracket.point()
+        gc, data = g(c)
+        if abs(gc) <= abs(best[2]):
+            best = (c, data, gc)
+        bracket = bracket.narrowed(c, gc)
+    return best, bracket
+
+
+def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
+    """The turning point between two converged points: zero of the tangent's p-component along
+    the arc, parametrised by ``s = t0 . (y - y0)``, by Illinois regula falsi."""
+    h = float(t0 @ (y1 - y0))
+
+    def at(s):
+        point = correct(y0 + s * t0, t0, float(t0 @ y0) + s, max_iter, t0)
+        if not isinstance(point, _Point):
+            return None, None
+        return point, point.tangent[-1]
+
+    bracket = IllinoisBracket(0.0, float(t0[-1]), h, g1)
+    best = None
+    for _ in range(max_steps):
+        s = bracket.point()
+        point, g = at(s)
+        if point is None:
+            return best
+        best = point
+        if abs(g) < 1e-12 or abs(bracket.b - bracket.a) < 1e-13 * max(abs(h), 1e-300):
+            return point
+        bracket = bracket.narrowed(s, g)
+    return best
+

@@ -1,0 +1,173 @@
+"""Floquet stability along a branch of periodic solutions, and unstable zones of linear systems.
+
+At each point the multipliers come from the cheapest exact route that applies:
+
+- **exact monodromy** (:func:`hbgear.engine.monodromy.multipliers_linear`, batched over the
+  points) where the system's :meth:`~hbgear.engine.system.PeriodicSystem.linearization` holds
+  along the solution (a linear system everywhere; e.g. the gear pair with backlash where the
+  teeth keep contact);
+- **Hill's method** (:func:`hbgear.engine.floquet.hill_multipliers_batch`, in batches) elsewhere.
+
+Multipliers are over the base period of the discretisation (``nu`` excitation periods). A batch
+that fails is redone point by point, so one bad point costs only itself (``None``).
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import NamedTuple
+
+import numpy as np
+
+from .floquet import hill_multipliers, hill_multipliers_batch, stable_verdict
+
+__all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
+           "ZONE_SCAN_SUBDIVISIONS"]
+
+#: Points per call of :func:`~hbgear.engine.floquet.hill_multipliers_batch` (one vmapped
+#: Hill-matrix evaluation and one stacked eigen-decomposition; the progress bar steps by this).
+HILL_BATCH = 32
+
+#: Sub-intervals per branch step of the exact scan for unstable zones (:func:`unstable_zones`).
+ZONE_SCAN_SUBDIVISIONS = 6
+
+
+class BranchStability(NamedTuple):
+    """Multipliers along a branch: `multipliers` (a list, an array per point or ``None`` where
+    it failed), `max_abs` and `stable` (arrays, NaN where unknown), `method` (text) and `warning`
+    (text or ``None``)."""
+
+    multipliers: list
+    max_abs: np.ndarray
+    stable: np.ndarray
+    method: str
+    warning: str | None
+
+
+def _progress(total, label, progress):
+    if not total or progress is False or not (progress or sys.stderr.isatty()):
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=total, desc=label, leave=False, file=sys.stderr)
+
+
+def _hill_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[str]:
+    """Hill multipliers at the points `indices` into ``out[i]``, a batch at a time; a failing
+    batch is redone point by point. **Returns:** the failure messages."""
+    failures = []
+    bar = _progress(len(indices), label, progress)
+    for lo in range(0, len(indices), HILL_BATCH):
+        batch = indices[lo:lo + HILL_BATCH]
+        try:
+            for i, m in zip(batch, hill_multipliers_batch(hb, zs[batch], ps[batch], system)):
+                out[i] = np.asarray(m)
+        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+            for i in batch:
+                try:
+                    out[i] = np.asarray(hill_multipliers(hb, zs[i], float(ps[i]), system))
+                except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
+                    failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    return failures
+
+
+def _exact_in_batches(linear, ps, indices, out, nu) -> None:
+    """Exact multipliers of the linear system at the points `indices` (per excitation period,
+    raised to ``nu``: over the base period), 256 points per batched evaluation."""
+    from .monodromy import multipliers_linear
+
+    idx = np.asarray(indices)
+    for lo in range(0, len(idx), 256):
+        part = idx[lo:lo + 256]
+        for k, m in zip(part, np.asarray(multipliers_linear(linear, ps[part])) ** nu):
+            out[k] = m
+
+
+def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multipliers") -> BranchStability:
+    """Floquet multipliers over the base period at every point ``(ps[i], zs[i])`` of a branch of
+    `system` discretised by `hb` (module docstring: exact monodromy where it applies, else Hill).
+
+    **Returns:** a :class:`BranchStability`; stability by :func:`~hbgear.engine.floquet.stable_verdict`
+    (the system's known neutral modes left out).
+    """
+    ps, zs = np.asarray(ps, dtype=float), np.asarray(zs, dtype=float)
+    n = len(ps)
+    out: list = [None] * n
+    linear = system.linearization()
+    exact = [i for i in range(n) if linear is not None and (linear is system or system.in_linear_regime(hb, zs[i], ps[i]))]
+    taken = set(exact)
+    hill = [i for i in range(n) if i not in taken]
+    fallback = None
+    if exact:
+        try:
+            _exact_in_batches(linear, ps, exact, out, hb.nu)
+        except Exception as exc:  # noqa: BLE001 -- Hill instead
+            fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
+            hill, exact = sorted(hill + exact), []
+    failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label)
+    exact_text = "exact monodromy (hbgear.engine.monodromy.multipliers_linear)"
+    hill_text = "Hill's method (hbgear.engine.floquet.hill_multipliers_batch)"
+    if not hill:
+        method = exact_text
+    elif not exact:
+        method = hill_text
+    else:
+        method = (f"{exact_text} at the {len(exact)} points in the linear regime (e.g. the teeth keep contact), "
+                  f"{hill_text} at the {len(hill)} others")
+    warning = fallback
+    if failures:
+        warning = ((fallback + "; ") if fallback else "") + (
+            f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
+    max_abs = np.array([np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0) for m in out])
+    stable = np.array([np.nan if m is None else float(stable_verdict(system, float(p), m, hb.nu))
+                       for p, m in zip(ps, out)])
+    return BranchStability(out, max_abs, stable, method, warning)
+
+
+def leaves_through(multiplier) -> str:
+    """``"-1"`` (period doubling), ``"+1"`` (divergence) or ``"complex"`` (a complex pair)."""
+    if abs(multiplier.imag) > 1e-6 * abs(multiplier):
+        return "complex"
+    return "-1" if multiplier.real < 0 else "+1"
+
+
+def unstable_zones(system, ps, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> list[dict]:
+    """Parameter intervals where a linear system's steady state is unstable, by exact monodromy
+    on a grid `subdivisions` times finer than the points `ps` (a zone narrower than a branch step
+    can lie between two stable points of the branch; this scan finds it to the grid's resolution).
+
+    **Returns:** one dict per zone: ``parameter_from``, ``parameter_to`` (first and last unstable
+    grid values), ``max_abs_floquet`` and ``multiplier`` at its maximum (per excitation period),
+    ``leaves_through`` (:func:`leaves_through`), ``resolution`` (the grid step there) and
+    ``between_points`` (no point of `ps` falls inside).
+    """
+    from .monodromy import multipliers_linear
+
+    p = np.sort(np.asarray(ps, dtype=float))
+    frac = np.arange(subdivisions) / subdivisions
+    grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
+    mult = np.concatenate([np.asarray(multipliers_linear(system, grid[lo:lo + 512])) for lo in range(0, len(grid), 512)])
+    unstable = np.array([not stable_verdict(system, float(p), m) for p, m in zip(grid, mult)])
+    zones = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        peak = start + int(np.argmax(np.abs(mult[start:stop]).max(axis=1)))
+        lead = mult[peak][np.argmax(np.abs(mult[peak]))]
+        lo, hi = grid[start], grid[stop - 1]
+        step = float(np.max(np.diff(grid[max(start - 1, 0):min(stop + 1, len(grid))]), initial=0.0))
+        zones.append({
+            "parameter_from": float(lo),
+            "parameter_to": float(hi),
+            "max_abs_floquet": float(abs(lead)),
+            "multiplier": [float(lead.real), float(lead.imag)],
+            "leaves_through": leaves_through(lead),
+            "resolution": step,
+            "between_points": not bool(np.any((p >= lo) & (p <= hi))),
+        })
+    return zones

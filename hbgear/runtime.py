@@ -1,0 +1,111 @@
+"""Opt-in process settings that make hbgear's compiled programs fast: one XLA thread, a disk cache.
+
+``import hbgear`` changes none of these; the ``hbgear`` command calls :func:`configure` before it
+computes anything, and a library user may call it too (before JAX creates its CPU client, i.e.
+before the first JAX computation of the process, for the thread setting to take effect)::
+
+    import hbgear
+    hbgear.runtime.configure()            # one XLA thread + the disk compilation cache
+
+- **One XLA thread.** A continuation step is ~340 small kernels; XLA:CPU hands independent ones
+  to an intra-op pool of one thread per CPU, and on small kernels the hand-offs cost more than
+  they win (2 cores: a point of the NLTV curve 1.0-1.3 ms with the pool, 0.7 ms with one
+  thread). JAX sizes that pool from the process's CPU affinity when it creates its CPU client,
+  so the client is created under a one-CPU affinity, which is then restored for every thread
+  (compilation keeps all cores: its threads are made later). Linux only.
+- **Disk compilation cache** (``~/.cache/hbgear/jax``, or ``$HBGEAR_CACHE_DIR``): a second run
+  of the same problem structure starts without compiling.
+
+Environment: ``HBGEAR_RUNTIME_THREADS=default`` keeps JAX's pool; ``HBGEAR_NO_CACHE=1`` leaves the
+cache off.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+__all__ = ["configure", "enable_compilation_cache", "single_threaded_runtime", "default_cache_dir"]
+
+
+def default_cache_dir() -> Path:
+    """``$HBGEAR_CACHE_DIR``, else ``$XDG_CACHE_HOME/hbgear/jax`` (``~/.cache/hbgear/jax``)."""
+    default = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hbgear" / "jax"
+    return Path(os.environ.get("HBGEAR_CACHE_DIR", default))
+
+
+def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | None:
+    """Keep compiled XLA programs on disk across runs; **returns** the directory, or ``None`` when
+    ``HBGEAR_NO_CACHE`` is set or the directory cannot be created."""
+    if os.environ.get("HBGEAR_NO_CACHE"):
+        return None
+    directory = Path(path) if path is not None else default_cache_dir()
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(directory))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    return directory
+
+
+def _threads() -> set[str]:
+    try:
+        return set(os.listdir("/proc/self/task"))
+    except OSError:  # pragma: no cover
+        return set()
+
+
+def single_threaded_runtime() -> bool:
+    """Create JAX's CPU client with a one-thread intra-op pool (see the module docstring).
+
+    **Returns:** whether it was done: ``False`` when ``HBGEAR_RUNTIME_THREADS=default``, on a
+    one-CPU process, off Linux, or when JAX's backend exists already (JAX used before). An
+    unknown ``HBGEAR_RUNTIME_THREADS`` value warns once and keeps the one-thread runtime.
+    """
+    setting = os.environ.get("HBGEAR_RUNTIME_THREADS", "1").strip().lower()
+    if setting not in ("1", "default"):
+        warnings.warn(f"HBGEAR_RUNTIME_THREADS = {setting!r}: expected '1' or 'default'; using '1'",
+                      RuntimeWarning, stacklevel=2)
+    if setting == "default" or not hasattr(os, "sched_setaffinity"):
+        return False
+    import jax
+
+    try:
+        from jax._src import xla_bridge
+
+        if xla_bridge.backends_are_initialized():
+            return False
+        original = os.sched_getaffinity(0)
+    except Exception:  # pragma: no cover - a JAX without this hook: keep its default
+        return False
+    if len(original) < 2:
+        return False
+    before = _threads()
+    try:
+        os.sched_setaffinity(0, {min(original)})
+        jax.devices()
+    except Exception:  # pragma: no cover - no usable backend: JAX reports it at first use
+        pass
+    finally:
+        for tid in [0, *(int(t) for t in _threads() - before)]:
+            try:
+                os.sched_setaffinity(tid, original)
+            except OSError:  # pragma: no cover - the thread has ended, or the mask is refused
+                pass
+    return True
+
+
+def configure(*, threads: bool = True, cache: bool = True) -> dict:
+    """Both settings (each optional); **returns** what was done, e.g. ``{"single_thread": True,
+    "cache_dir": "/home/u/.cache/hbgear/jax"}``."""
+    done = {}
+    if cache:
+        directory = enable_compilation_cache()
+        done["cache_dir"] = None if directory is None else str(directory)
+    if threads:
+        done["single_thread"] = single_threaded_runtime()
+    return done
