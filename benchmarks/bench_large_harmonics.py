@@ -17,7 +17,9 @@ state to compile, then three timed solves (one when the first took over 10 s); a
 time between two successive linearisations (linearise, linear solve, line search), the median
 over the timed steps is reported with the
 GMRES products per step, the bytes of the prepared operator and Jacobian, the residual reached
-and the DTE RMS. Part 2 runs with one BLAS thread (``--blas-threads``): on this shared 2-core
+and the DTE RMS. Part 2 runs with the settings of the ``hbgear`` command
+(:func:`hbgear.runtime.configure`: one XLA thread when JAX has not run yet in the process, the disk
+cache) and with one BLAS thread (``--blas-threads``): on this shared 2-core
 machine under load, OpenBLAS's two threads made one LU of 258-1026 unknowns 20-500x slower
 than one thread (0.36 vs 188 ms at 258, load average ~7), which would measure the machine's
 load instead of the methods. The slope of log(step time) vs log(H) is fitted over all structured sizes and
@@ -156,7 +158,11 @@ def slope(rows, low: int = 0) -> float:
 def run(quick: bool = False, dense_max: int | None = None, command_runs: int = 2, harmonics_list=HARMONICS,
         blas_threads: int | None = 1) -> dict:
     dense_max = dense_max or (512 if quick else 1024)
-    out = {"command": [], "cases": []}
+    from hbgear import runtime
+
+    # part 2 in this process with the settings the hbgear command runs with (one XLA thread: only
+    # if JAX has not run yet in this process, e.g. not under run.py; the disk cache)
+    out = {"command": [], "cases": [], "runtime": runtime.configure()}
     with tempfile.TemporaryDirectory(prefix="hbgear-large-h-") as tmp:
         for k in range(command_runs):
             out["command"].append(run_command(Path(tmp) / f"run{k}"))
@@ -185,7 +191,8 @@ def table(out: dict) -> str:
                      f"{c['max_abs_floquet']:14.10f} {c['newton']:7d}")
     lines.append("  (run 1 compiles into the disk cache, run 2 loads from it)")
     lines += ["", "part 2: one Newton step vs H (median over the steps of up to 3 timed solves after a compiling one; "
-              f"BLAS threads: {out.get('blas_threads') or 'default'})",
+              f"BLAS threads: {out.get('blas_threads') or 'default'}; one XLA thread: "
+              f"{out.get('runtime', {}).get('single_thread')})",
               f"{'H':>5s} {'size':>6s} {'path':>10s} {'step ms':>9s} {'steps':>5s} {'GMRES/step':>10s} "
               f"{'operator MB':>11s} {'residual':>9s} {'DTE rms um':>15s}"]
     for c in out["cases"]:

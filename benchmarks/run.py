@@ -63,6 +63,7 @@ def _run(q):
     import bench_large_harmonics
     import bench_newton_breakdown
     import bench_stability_map
+    import bench_study
 
     t0 = time.perf_counter()
     print("#", machine(), flush=True)
@@ -81,7 +82,10 @@ def _run(q):
     print("\n## 4. where the time of a continuation step goes", flush=True)
     b, protos = bench_newton_breakdown.run(q)
     print(bench_newton_breakdown.table(b, protos), flush=True)
-    print("\n## 5. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
+    print("\n## 5. studies: local processes vs one process", flush=True)
+    study = bench_study.run(q)
+    print(bench_study.table(study), flush=True)
+    print("\n## 6. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
     large = bench_large_harmonics.run(q)
     print(bench_large_harmonics.table(large), flush=True)
 
@@ -133,15 +137,24 @@ def _run(q):
         ("4", "share in linear algebra",
          f"{100 * sum(v for k, v in t.total.items() if k.startswith('linalg.')) / b['wall']:.0f} %", ""),
     ]
+    cpus = study["cpus"]
+    rows += [
+        ("5", f"study of {study['samples']} curves, one process", f"{study[1]['per_minute']:.0f} /min", ""),
+        ("5", f"study of {study['samples']} curves, {cpus} local processes", f"{study[cpus]['per_minute']:.0f} /min",
+         ""),
+        ("5", "local processes / one process (samples per minute)", f"{study['speedup']:.2f}x", ""),
+        ("5", "compile share of the samples' time, one process / processes",
+         f"{100 * study[1]['compile_fraction']:.0f} / {100 * study[cpus]['compile_fraction']:.0f} %", ""),
+    ]
     first, warm = large["command"][0], large["command"][-1]
     structured = [c for c in large["cases"] if c["operator"] == "structured"]
     rows += [
-        ("5", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
+        ("6", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
          "<= 10 s"),
-        ("5", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
-        ("5", "H = 2048 solve, peak resident memory (largest run)",
+        ("6", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
+        ("6", "H = 2048 solve, peak resident memory (largest run)",
          f"{max(c['rss_mb'] for c in large['command']):.0f} MB", "<= 2 GB"),
-        ("5", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
+        ("6", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
          f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
     print("\n## summary (one run, this machine)")

@@ -25,6 +25,7 @@ from importlib.metadata import PackageNotFoundError, version
 _EXPORTS = {
     "solve": "api", "frequency_response": "api", "simulate": "api", "stability_map": "api",
     "FrequencyResponse": "api", "SystemFrequencyResponse": "api",
+    "study": "studies", "load_study": "studies", "StudyResult": "studies",
     "load_config": "config", "parse_config": "config", "RunConfig": "config",
     "build_model": "build",
     "ConfigError": "errors", "ConvergenceError": "errors",
@@ -38,7 +39,7 @@ _EXPORTS = {
     "PeriodicSolution": "gear.solve", "solve_periodic": "gear.solve", "rpm_to_rad_s": "gear.solve",
     "rad_s_to_rpm": "gear.solve",
 }
-_SUBMODULES = ("runtime", "api", "config", "build", "errors", "engine", "gear", "outputs", "cli")
+_SUBMODULES = ("runtime", "api", "config", "build", "errors", "engine", "gear", "outputs", "cli", "studies", "tasks")
 
 __all__ = sorted(_EXPORTS) + ["runtime", "__version__"]
 

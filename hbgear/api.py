@@ -19,8 +19,21 @@ from .gear import response as _gear
 from .gear.model import GearPairModel
 from .gear.solve import PeriodicSolution, rpm_to_rad_s
 
-__all__ = ["FrequencyResponse", "PeriodicSolution", "SystemFrequencyResponse", "frequency_response", "simulate", "solve",
-           "stability_map"]
+__all__ = ["FrequencyResponse", "PeriodicSolution", "SystemFrequencyResponse", "dataframe", "frc_curve",
+           "frequency_response", "simulate", "solve", "stability_map"]
+
+
+def dataframe(columns):
+    """A :class:`pandas.DataFrame` of `columns` (``{name: values}``, in order); pandas is optional.
+
+    **Raises:** ``ImportError`` with what to install when pandas is missing.
+    """
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError("to_dataframe() needs pandas, which hbgear does not depend on: pip install pandas "
+                          "(the same data without it: .rows() or the arrays)") from None
+    return pandas.DataFrame({k: list(v) if isinstance(v, (list, tuple)) else v for k, v in columns.items()})
 
 
 class FrequencyResponse(_gear.GearFrequencyResponse):
@@ -52,6 +65,12 @@ class FrequencyResponse(_gear.GearFrequencyResponse):
         from .outputs.plots import floquet_figure
 
         return floquet_figure(self, self.floquet_points() if points is None else points, title)
+
+    def to_dataframe(self):
+        """The ``frc.csv`` table as a :class:`pandas.DataFrame` (pandas is not a dependency)."""
+        from .gear.response import COLUMNS
+
+        return dataframe({k: self.table[k] for k in COLUMNS})
 
 
 class SystemFrequencyResponse(_engine.FrequencyResponse):
@@ -147,6 +166,22 @@ def frequency_response(target, *, speed_rpm: tuple | None = None, parameter: tup
         tolerance=tolerance, max_iterations=max_iterations, max_points=max_points, step=step, z0=z0,
         stability=stability, period_doubling=pd, progress=progress)
     return SystemFrequencyResponse(**{f: getattr(curve, f) for f in curve.__dataclass_fields__})
+
+
+def frc_curve(config, *, stability: bool = True, period_doubling=None, progress=None) -> FrequencyResponse:
+    """The curve ``hbgear frc`` computes for a validated config: :func:`frequency_response` of its
+    model over ``[sweep]`` (range, ``max_points``, ``step_rpm``) with the ``[solver]`` settings
+    (``harmonics = "auto"`` honoured); `period_doubling` ``None``: ``sweep.period_doubling``.
+    """
+    from .build import build_model
+
+    so, sw = config.solver, config.sweep
+    flag = sw.period_doubling if period_doubling is None else period_doubling
+    return frequency_response(
+        build_model(config), speed_rpm=(sw.speed_rpm_start, sw.speed_rpm_stop),
+        harmonics=so.harmonics if so.harmonics is not None else "auto", nu=so.subharmonic, samples=so.time_samples,
+        tolerance=so.tolerance, max_iterations=so.max_iterations, max_points=sw.max_points, step=sw.step_rpm,
+        stability=stability, period_doubling=flag, progress=progress)
 
 
 def simulate(model: GearPairModel, *, speed_rpm: float, cycles: int = 400, rtol: float = 1e-9, atol_um=None,

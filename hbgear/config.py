@@ -12,7 +12,7 @@ given and what is allowed. Checks that need the gear geometry (e.g. the contact 
 `addendum_coefficient` produces, a relief length against the path of contact, the contents of
 `mesh.pair_stiffness_file`) belong to the physics code (:mod:`hbgear.build`).
 
-**Public API:** :func:`load_config`, :func:`parse_config`, :func:`apply_overrides`,
+**Public API:** :func:`load_config`, :func:`read_toml`, :func:`parse_config`, :func:`apply_overrides`,
 :class:`RunConfig` (with :meth:`RunConfig.to_dict`) and the section dataclasses.
 """
 
@@ -42,10 +42,13 @@ __all__ = [
     "RunConfig",
     "SimulateConfig",
     "SolverConfig",
+    "StudyConfig",
+    "StudyParameter",
     "SweepConfig",
     "apply_overrides",
     "load_config",
     "parse_config",
+    "read_toml",
 ]
 
 MAX_TEETH = 10_000
@@ -69,6 +72,10 @@ MODEL_KEYS = {
     "potential_energy": ("youngs_modulus_GPa", "poisson_ratio", "rack_dedendum_coefficient",
                          "rack_tip_radius_coefficient"),
 }
+
+STUDY_KINDS = ("grid", "monte_carlo")
+STUDY_DISTRIBUTIONS = ("normal", "uniform", "lognormal", "choice")
+MAX_STUDY_SAMPLES = 1_000_000
 
 
 # ----------------------------------------------------------------------------- dataclasses
@@ -377,6 +384,54 @@ class MapConfig:
     scheduler: str | None = None
 
 
+@dataclass(frozen=True)
+class StudyParameter:
+    """One varied config key of a study.
+
+    **Fields:** `key` as written in ``[study.parameters]``, canonical: ``"section.key"`` or, for
+    one entry of a list-valued key, ``"section.key[i]"`` (0-based); `section`, `name`, `index`
+    (the entry, or `None`); `values` (kind "grid": the values in order, TOML-shaped, checked per
+    sample by the normal loader); `distribution` (kind "monte_carlo": one of
+    :data:`STUDY_DISTRIBUTIONS`) and its `arguments`.
+    """
+
+    key: str
+    section: str
+    name: str
+    index: int | None = None
+    values: tuple = ()
+    distribution: str | None = None
+    arguments: tuple = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyConfig:
+    """A study: many frequency-response curves, one per sample of the varied config keys.
+
+    **Fields:** `kind` ("grid": every combination of the `values`, the last key fastest;
+    "monte_carlo": `samples` independent draws, reproducible from `seed`); `parameters` (tuple of
+    :class:`StudyParameter`, in the order of the table; empty: the config defines no study);
+    `samples`, `seed` (monte_carlo only); `scheduler` (Dask scheduler address, or `None` for local processes).
+    """
+
+    kind: str = "grid"
+    parameters: tuple[StudyParameter, ...] = ()
+    samples: int | None = None
+    seed: int = 0
+    scheduler: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``[study]`` table as in the TOML file (canonical dotted keys)."""
+        out: dict[str, Any] = {"kind": self.kind}
+        if self.kind == "monte_carlo":
+            out |= {"samples": self.samples, "seed": self.seed}
+        if self.scheduler is not None:
+            out["scheduler"] = self.scheduler
+        out["parameters"] = {p.key: list(p.values) if p.distribution is None else {p.distribution: list(p.arguments)}
+                             for p in self.parameters}
+        return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class RunConfig:
     """A whole validated run configuration (all SI)."""
@@ -391,6 +446,7 @@ class RunConfig:
     simulate: SimulateConfig = field(default_factory=SimulateConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
     map: MapConfig = field(default_factory=MapConfig)
+    study: StudyConfig = field(default_factory=StudyConfig)
 
     def __post_init__(self):
         model = self.mesh.stiffness_model
@@ -484,6 +540,8 @@ class RunConfig:
         }
         for section in ("sweep", "map"):
             out[section] = {k: v for k, v in out[section].items() if v is not None}
+        if self.study.parameters:
+            out["study"] = self.study.to_dict()
         return out
 
 
@@ -725,6 +783,7 @@ def _section(name: str, cls: type, spec: Mapping[str, _Key], post=None):
                 kwargs[field_name] = s.get(key, check)
         return cls(**(post(s, kwargs) if post else kwargs))
 
+    parse.keys = tuple(spec)  # the section's keys (a study may vary any of them)
     return parse
 
 
@@ -866,6 +925,105 @@ _map = _section("map", MapConfig, {
     "scheduler": _Key("scheduler", _address),
 })
 
+
+# ----------------------------------------------------------------------------- [study]
+
+_STUDY_KEY = re.compile(r"([A-Za-z0-9_-]+)\.([A-Za-z0-9_-]+)(?:\[([0-9]+)\])?")
+_DISTRIBUTION_TEXT = ("{ normal = [mean, std] }, { uniform = [low, high] }, { lognormal = [mu, sigma] } "
+                      "(of the logarithm) or { choice = [value, ...] }")
+
+
+def _is_distribution(value: object) -> bool:
+    return isinstance(value, Mapping) and len(value) == 1 and next(iter(value)) in STUDY_DISTRIBUTIONS
+
+
+def _flat_parameters(table: Mapping, prefix: str = "") -> list[tuple[str, object]]:
+    """``[study.parameters]`` as ``(dotted key, value)`` pairs: quoted keys (``"mesh.damping_ratio"``)
+    and TOML's nested spelling (``mesh.damping_ratio = ...``, a table ``mesh``) read alike."""
+    pairs = []
+    for key, value in table.items():
+        dotted = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, Mapping) and not prefix and "." not in dotted and not _is_distribution(value):
+            pairs += _flat_parameters(value, dotted)  # a section's table
+        else:
+            pairs.append((dotted, value))
+    return pairs
+
+
+def _study_key(where: str, key: str, value: object) -> tuple[str, str, int | None]:
+    """``(section, name, index)`` of a varied key, checked against the known sections and keys."""
+    match = _STUDY_KEY.fullmatch(key)
+    if match is None:
+        raise ConfigError(where, value, 'a dotted config key "section.key", or "section.key[i]" for entry i of a list')
+    section, name, index = match.group(1), match.group(2), match.group(3)
+    if section not in _SECTIONS or section == "study":
+        allowed = ", ".join(s for s in _SECTIONS if s != "study")
+        raise ConfigError(where, value, f"a key of a config section ({allowed})")
+    keys = getattr(_SECTIONS[section], "keys", None)
+    if keys is not None and name not in keys:
+        raise ConfigError(where, value, f"a key of [{section}]: " + ", ".join(keys))
+    return section, name, None if index is None else int(index)
+
+
+def _distribution(where: str, value: Mapping) -> tuple[str, tuple]:
+    """``(name, arguments)`` of a checked distribution table."""
+    name, args = next(iter(value.items()))
+    if name == "choice":
+        if not isinstance(args, list) or not args:
+            raise ConfigError(where, value, "{ choice = [value, ...] } with at least one value")
+        return name, tuple(args)
+    text = {"normal": "[mean, std] with std >= 0", "uniform": "[low, high] with low <= high",
+            "lognormal": "[mu, sigma] (mean and std of ln x) with sigma >= 0"}[name]
+    if not isinstance(args, list) or len(args) != 2 or not all(_is_number(a) and math.isfinite(a) for a in args):
+        raise ConfigError(where, value, f"{{ {name} = {text} }}, finite numbers")
+    a, b = (float(x) for x in args)
+    if (b < 0.0) if name != "uniform" else (b < a):
+        raise ConfigError(where, value, f"{{ {name} = {text} }}")
+    return name, (a, b)
+
+
+def _study_parameter(kind: str, where: str, key: str, value: object) -> StudyParameter:
+    section, name, index = _study_key(where, key, value)
+    canonical = f"{section}.{name}" + ("" if index is None else f"[{index}]")
+    if kind == "grid":
+        if not isinstance(value, list) or not value:
+            allowed = ('a non-empty list of values (kind = "grid"); distributions need kind = "monte_carlo"'
+                       if isinstance(value, Mapping) else 'a non-empty list of values (kind = "grid")')
+            raise ConfigError(where, value, allowed)
+        return StudyParameter(canonical, section, name, index, values=tuple(value))
+    if not _is_distribution(value):
+        raise ConfigError(where, value, f'a distribution (kind = "monte_carlo"): {_DISTRIBUTION_TEXT}')
+    dist, args = _distribution(where, value)
+    return StudyParameter(canonical, section, name, index, distribution=dist, arguments=args)
+
+
+def _study(table: object) -> StudyConfig:
+    """``[study]``: kind, samples and seed (monte_carlo), scheduler, and ``[study.parameters]``."""
+    s = _Section("study", table, ("kind", "samples", "seed", "scheduler", "parameters"))
+    kind = s.get("kind", _one_of(STUDY_KINDS), "grid")
+    for key in ("samples", "seed"):
+        if kind == "grid" and s.has(key):
+            raise ConfigError(s.key(key), s.raw(key), 'only with study.kind = "monte_carlo"')
+    samples = s.get("samples", _int(1, MAX_STUDY_SAMPLES)) if kind == "monte_carlo" else None
+    seed = s.get("seed", _int(0, 2**63 - 1), 0)
+    scheduler = s.get("scheduler", _address, None)
+    raw = s.get("parameters", lambda key, value: value)
+    if not isinstance(raw, Mapping) or not raw:
+        raise ConfigError(s.key("parameters"), raw, 'a table [study.parameters] of "section.key" = values')
+    parameters, targets = [], {}
+    for key, value in _flat_parameters(raw):
+        where = f"study.parameters.{_key_text(key)}"
+        parameter = _study_parameter(kind, where, key, value)
+        whole, entry = (parameter.section, parameter.name), (parameter.section, parameter.name, parameter.index)
+        clash = [k for k, t in targets.items() if t == entry or t[:2] == whole and None in (t[2], parameter.index)]
+        if clash:
+            raise ConfigError(where, value, f"a key not varied already (study.parameters.{_key_text(clash[0])})")
+        targets[parameter.key] = entry
+        parameters.append(parameter)
+    if kind == "grid" and math.prod(len(p.values) for p in parameters) > MAX_STUDY_SAMPLES:
+        raise ConfigError(s.key("parameters"), raw, f"a grid of at most {MAX_STUDY_SAMPLES} samples")
+    return StudyConfig(kind=kind, parameters=tuple(parameters), samples=samples, seed=seed, scheduler=scheduler)
+
 _SECTIONS: dict[str, Callable[[object], Any]] = {
     "gear": _gear,
     "mesh": _mesh,
@@ -877,6 +1035,7 @@ _SECTIONS: dict[str, Callable[[object], Any]] = {
     "simulate": _simulate,
     "sweep": _sweep,
     "map": _map,
+    "study": _study,
 }
 _REQUIRED = ("gear", "mesh", "load")
 
@@ -960,9 +1119,18 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
     **Raises:** :class:`~hbgear.errors.ConfigError` -- key `"config"` when the file is
     missing, unreadable or not valid TOML; otherwise the dotted key of the bad value.
     """
+    return parse_config(read_toml(path), overrides, base_dir=Path(path).parent)
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The TOML document at `path` as a dict, unchecked (:func:`parse_config` checks it).
+
+    **Raises:** ``ConfigError("config", path, ...)`` when the file is missing, unreadable or
+    not valid TOML.
+    """
     try:
         text = Path(path).read_bytes().decode("utf-8")
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except OSError as exc:
         reason = exc.strerror or type(exc).__name__
         raise ConfigError("config", str(path), f"a readable TOML file ({reason})") from None
@@ -971,4 +1139,3 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
     except tomllib.TOMLDecodeError as exc:
         reason = " ".join(str(exc).split())
         raise ConfigError("config", str(path), f"a readable TOML file ({reason})") from None
-    return parse_config(data, overrides, base_dir=Path(path).parent)

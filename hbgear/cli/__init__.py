@@ -101,7 +101,7 @@ def register(command: Command, *, replace: bool = False) -> Command:
 
 
 #: The shipped commands: one module each in this package, registering itself on import.
-BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "static_te", "validate")
+BUILTIN_COMMANDS = ("frc", "solve", "simulate", "stability_map", "static_te", "study", "validate")
 
 
 def _load_builtin_commands() -> None:

@@ -153,8 +153,7 @@ def _report(curve, out_dir, seconds) -> None:
 def run(config, args, out_dir) -> int:
     from dataclasses import asdict
 
-    from ..api import frequency_response
-    from ..build import build_model
+    from ..api import frc_curve
     from ..engine.continuation import sweep_method
     from ..errors import ConvergenceError
     from ..gear.response import COLUMNS, FLOQUET_COLUMNS
@@ -163,13 +162,9 @@ def run(config, args, out_dir) -> int:
 
     t0 = time.perf_counter()
     so, sw = config.solver, config.sweep
-    model = build_model(config)
     flag, _ = _period_doubling_flag(config, args)
-    curve = frequency_response(
-        model, speed_rpm=(sw.speed_rpm_start, sw.speed_rpm_stop),
-        harmonics=so.harmonics if so.harmonics is not None else "auto", nu=so.subharmonic, samples=so.time_samples,
-        tolerance=so.tolerance, max_iterations=so.max_iterations, max_points=sw.max_points, step=sw.step_rpm,
-        stability=not args.no_stability, period_doubling=flag, progress=False if args.no_progress else None)
+    curve = frc_curve(config, stability=not args.no_stability, period_doubling=flag,
+                      progress=False if args.no_progress else None)
     t_done = time.perf_counter()
     write_csv_atomic(out_dir / "frc.csv", COLUMNS, [[row[c] for c in COLUMNS] for row in curve.rows()])
     if curve.response.stability is not None:

@@ -11,7 +11,7 @@ rows are Dask futures on that cluster (``dask.distributed.Client(ADDRESS)``; nee
 
 Resuming: every finished row is appended to ``stability.partial.csv`` in the output directory
 (flushed and fsynced per row; its first line is a fingerprint of the configuration and the
-grid). Re-running the same command skips the rows found there; ``--fresh`` ignores them. At the
+grid; the record and the local/Dask execution are :mod:`hbgear.tasks`). Re-running the same command skips the rows found there; ``--fresh`` ignores them. At the
 end ``stability.csv`` (``speed_rpm, contact_ratio, max_abs_floquet``) and ``stability.png`` are
 written atomically and the partial file is removed.
 """
@@ -19,10 +19,7 @@ written atomically and the partial file is removed.
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -30,7 +27,8 @@ import numpy as np
 
 from . import Command, register
 from ..errors import ConfigError
-from ..outputs.io import to_jsonable, write_csv_atomic, write_text_atomic
+from ..outputs.io import to_jsonable, write_csv_atomic
+from ..tasks import Journal, fingerprint, run_tasks
 
 __all__ = ["STABILITY_MAP", "compute_row", "grid", "run_map"]
 
@@ -64,69 +62,44 @@ def _fingerprint(config, speeds, ratios) -> str:
     data = to_jsonable(config.to_dict())
     data.get("map", {}).pop("scheduler", None)
     data["grid"] = {"speeds_rpm": [repr(float(s)) for s in speeds], "contact_ratios": [repr(float(g)) for g in ratios]}
-    text = json.dumps(data, sort_keys=True, default=str)
-    return "# hbgear stability-map partial; sha256=" + hashlib.sha256(text.encode()).hexdigest()
+    return fingerprint("stability-map", data)
 
 
 def _row_lines(ratio: float, speeds, values) -> str:
     return "".join(f"{float(s)!r},{float(ratio)!r},{float(v)!r}\n" for s, v in zip(speeds, values))
 
 
-def _load_partial(path: Path, fingerprint: str, speeds, ratios) -> dict[int, np.ndarray]:
-    """Complete rows of a previous run of the same map (index into `ratios` -> values)."""
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (FileNotFoundError, UnicodeDecodeError):
-        return {}
-    if len(lines) < 2 or lines[0] != fingerprint or lines[1] != ",".join(HEADER):
-        return {}
-    index = {float(g): i for i, g in enumerate(ratios)}
-    column = {float(s): k for k, s in enumerate(speeds)}
-    found: dict[int, dict[int, float]] = {}
-    for line in lines[2:]:
-        parts = line.split(",")
-        if len(parts) != 3:
-            continue
-        try:
-            s, g, v = (float(x) for x in parts)
-        except ValueError:
-            continue
-        if g in index and s in column:
-            found.setdefault(index[g], {})[column[s]] = v
-    return {i: np.array([row[k] for k in range(len(speeds))]) for i, row in found.items() if len(row) == len(speeds)}
+class _RowCodec:
+    """The partial file's rows: ``speed_rpm,contact_ratio,max_abs_floquet`` per point; a task (the
+    index of a contact ratio) counts as finished when all its speeds are there."""
 
+    header = ",".join(HEADER)
 
-class _PartialWriter:
-    """Append-only, per-row flushed and fsynced log of finished rows."""
+    def __init__(self, speeds, ratios):
+        self.speeds, self.ratios = speeds, ratios
 
-    def __init__(self, path: Path, fingerprint: str, speeds, done: dict[int, np.ndarray], ratios):
-        # rewrite the valid part atomically first: a row cut by a crash must not glue onto the next
-        text = fingerprint + "\n" + ",".join(HEADER) + "\n"
-        text += "".join(_row_lines(ratios[i], speeds, done[i]) for i in sorted(done))
-        write_text_atomic(path, text)
-        self.path, self.speeds = path, speeds
-        self.fh = open(path, "a", encoding="utf-8", newline="")
+    def encode(self, i: int, values) -> str:
+        return _row_lines(self.ratios[i], self.speeds, values)
 
-    def add(self, ratio: float, values) -> None:
-        self.fh.write(_row_lines(ratio, self.speeds, values))
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
-
-    def close(self) -> None:
-        self.fh.close()
+    def decode(self, lines) -> dict[int, np.ndarray]:
+        index = {float(g): i for i, g in enumerate(self.ratios)}
+        column = {float(s): k for k, s in enumerate(self.speeds)}
+        found: dict[int, dict[int, float]] = {}
+        for line in lines:
+            parts = line.split(",")
+            if len(parts) != 3:
+                continue
+            try:
+                s, g, v = (float(x) for x in parts)
+            except ValueError:
+                continue
+            if g in index and s in column:
+                found.setdefault(index[g], {})[column[s]] = v
+        n = len(self.speeds)
+        return {i: np.array([row[k] for k in range(n)]) for i, row in found.items() if len(row) == n}
 
 
 # ----------------------------------------------------------------------------- running
-
-
-def _connect(address: str):
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise ConfigError(
-            "map.scheduler", address, "a Dask scheduler needs dask.distributed: install hbgear[distributed]"
-        ) from None
-    return Client(address)
 
 
 def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool = False, progress: bool = True):
@@ -135,46 +108,14 @@ def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool 
     **Returns:** ``(speeds_rpm, contact_ratios, values)`` with values of shape
     ``(len(contact_ratios), len(speeds_rpm))``.
     """
-    from tqdm import tqdm
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     speeds, ratios = grid(config)
-    fingerprint = _fingerprint(config, speeds, ratios)
-    partial = out_dir / PARTIAL
-    done = {} if fresh else _load_partial(partial, fingerprint, speeds, ratios)
-    todo = [i for i in range(len(ratios)) if i not in done]
-    writer = _PartialWriter(partial, fingerprint, speeds, done, ratios)
-    bar = tqdm(total=len(ratios), initial=len(done), desc="stability-map", unit="row", disable=not progress or None)
-    try:
-        if scheduler is None:
-            for i in todo:
-                done[i] = compute_row(config, ratios[i], speeds)
-                writer.add(ratios[i], done[i])
-                bar.update(1)
-        elif todo:
-            client = _connect(scheduler)
-            try:
-                from dask.distributed import as_completed
-
-                futures = {
-                    client.submit(compute_row, config, float(ratios[i]), speeds, pure=False): i for i in todo
-                }
-                try:
-                    for future in as_completed(futures):
-                        i = futures[future]
-                        done[i] = np.asarray(future.result(), dtype=float)
-                        writer.add(ratios[i], done[i])
-                        bar.update(1)
-                except BaseException:
-                    client.cancel(list(futures))
-                    raise
-            finally:
-                client.close()
-    finally:
-        bar.close()
-        writer.close()
-    values = np.stack([done[i] for i in range(len(ratios))])
+    journal = Journal(out_dir / PARTIAL, _fingerprint(config, speeds, ratios), _RowCodec(speeds, ratios))
+    tasks = {i: (config, ratios[i], speeds) for i in range(len(ratios))}
+    done = run_tasks(compute_row, tasks, journal=journal, done={} if fresh else journal.read(), scheduler=scheduler,
+                     progress=progress, desc="stability-map", unit="row", scheduler_key="map.scheduler")
+    values = np.stack([np.asarray(done[i], dtype=float) for i in range(len(ratios))])
     write_csv_atomic(
         out_dir / "stability.csv",
         HEADER,
@@ -185,7 +126,7 @@ def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool 
 
     save_figure_atomic(stability_map_figure(speeds, ratios, values, title=_title(config)), out_dir / "stability.png",
                        dpi=130)
-    partial.unlink(missing_ok=True)
+    journal.remove()
     return speeds, ratios, values
 
 

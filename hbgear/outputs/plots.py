@@ -11,7 +11,7 @@ import numpy as np
 
 __all__ = ["frc_figure", "orders_figure", "dynamic_factor_figure", "floquet_figure", "system_curve_figure",
            "timeseries_figure", "validation_figure", "stability_map_figure", "static_te_figure", "harris_figure",
-           "CONTOUR_MARGIN", "ORDER_MAP_RANGE_DB"]
+           "study_figure", "CONTOUR_MARGIN", "ORDER_MAP_RANGE_DB"]
 
 #: The unit contour of a stability map is drawn at 1 + this, so a neutral mode (the soft output
 #: spring's, whose modulus is 1 to within rounding) does not draw noise all over the map.
@@ -369,6 +369,64 @@ def validation_figure(results):
         ax_f.set_ylabel("DTE amplitude [um]")
         ax_f.legend(fontsize=7)
     fig.tight_layout()
+    return fig
+
+
+def _positions(values) -> tuple[np.ndarray, list | None]:
+    """Numeric x positions of a varied key's values (categorical ones: 0, 1, ... and their labels)."""
+    values = np.asarray(values, dtype=object)
+    try:
+        return values.astype(float), None
+    except (TypeError, ValueError):
+        labels = list(dict.fromkeys(str(v) for v in values))
+        return np.array([labels.index(str(v)) for v in values], dtype=float), labels
+
+
+def study_figure(kind: str, values: dict, metrics: dict, success, title: str = ""):
+    """A study's picture. `values` ``{varied key: per-sample values}``, `metrics` ``{name:
+    per-sample values}`` (the first is the main one), `success` per sample (failed samples are
+    left out). Grid: each metric against the first varied key, one line per combination of the
+    other keys' values. Monte Carlo: the main metric against each varied key (scatter) and its
+    histogram."""
+    success = np.asarray(success, dtype=bool)
+    keys, names = list(values), list(metrics)
+    if kind == "grid":
+        fig = _figure(figsize=(4.4 * len(names), 3.6), layout="constrained")
+        axes = np.atleast_1d(fig.subplots(1, len(names)))
+        x, labels = _positions(values[keys[0]])
+        others = [tuple(str(values[k][i]) for k in keys[1:]) for i in range(len(x))]
+        for ax, name in zip(axes, names):
+            y = np.asarray(metrics[name], dtype=float)
+            for group in dict.fromkeys(others):
+                rows = [i for i in range(len(x)) if others[i] == group and success[i]]
+                rows.sort(key=lambda i: x[i])
+                label = ", ".join(f"{k} = {v}" for k, v in zip(keys[1:], group)) or None
+                ax.plot(x[rows], y[rows], "o-", ms=4, label=label)
+            ax.set_xlabel(keys[0])
+            ax.set_ylabel(name)
+            if labels is not None:
+                ax.set_xticks(range(len(labels)), labels, fontsize=7)
+            if len(keys) > 1 and ax is axes[0]:
+                ax.legend(fontsize=7)
+            ax.grid(alpha=0.3)
+    else:
+        shown = keys[:3]
+        fig = _figure(figsize=(3.4 * (len(shown) + 1), 3.2), layout="constrained")
+        axes = np.atleast_1d(fig.subplots(1, len(shown) + 1))
+        y = np.asarray(metrics[names[0]], dtype=float)
+        for ax, key in zip(axes, shown):
+            x, labels = _positions(values[key])
+            ax.plot(x[success], y[success], ".", ms=5, alpha=0.7)
+            ax.set_xlabel(key)
+            ax.set_ylabel(names[0])
+            if labels is not None:
+                ax.set_xticks(range(len(labels)), labels, fontsize=7)
+            ax.grid(alpha=0.3)
+        ok = y[success & np.isfinite(y)]
+        axes[-1].hist(ok, bins=max(5, min(30, int(np.sqrt(max(len(ok), 1))) * 2)), color="0.45")
+        axes[-1].set_xlabel(names[0])
+        axes[-1].set_ylabel("samples")
+    fig.suptitle(title, fontsize=9)
     return fig
 
 
