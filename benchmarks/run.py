@@ -60,6 +60,7 @@ def main(argv=None):
 def _run(q):
     import bench_duffing_tools
     import bench_frc_vs_ti
+    import bench_large_harmonics
     import bench_newton_breakdown
     import bench_stability_map
     import bench_study
@@ -84,6 +85,9 @@ def _run(q):
     print("\n## 5. studies: local processes vs one process", flush=True)
     study = bench_study.run(q)
     print(bench_study.table(study), flush=True)
+    print("\n## 6. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
+    large = bench_large_harmonics.run(q)
+    print(bench_large_harmonics.table(large), flush=True)
 
     t = b["timer"]
     pts = b["points"]
@@ -141,6 +145,17 @@ def _run(q):
         ("5", "local processes / one process (samples per minute)", f"{study['speedup']:.2f}x", ""),
         ("5", "compile share of the samples' time, one process / processes",
          f"{100 * study[1]['compile_fraction']:.0f} / {100 * study[cpus]['compile_fraction']:.0f} %", ""),
+    ]
+    first, warm = large["command"][0], large["command"][-1]
+    structured = [c for c in large["cases"] if c["operator"] == "structured"]
+    rows += [
+        ("6", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
+         "<= 10 s"),
+        ("6", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
+        ("6", "H = 2048 solve, peak resident memory (largest run)",
+         f"{max(c['rss_mb'] for c in large['command']):.0f} MB", "<= 2 GB"),
+        ("6", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
+         f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")

@@ -18,6 +18,7 @@ import numpy as np
 __all__ = [
     "basis_size",
     "derivative_matrix",
+    "differentiate",
     "convolution_matrix",
     "coefficients_to_real",
     "synthesize",
@@ -39,6 +40,15 @@ def derivative_matrix(harmonics: int, omega, xp=np):
     d[2 * k.astype(int) - 1, 2 * k.astype(int)] = k
     d[2 * k.astype(int), 2 * k.astype(int) - 1] = -k
     return omega * xp.asarray(d)
+
+
+def differentiate(x, harmonics: int, omega, xp=np):
+    """``D @ x`` along the last axis without the matrix (:func:`derivative_matrix`):
+    ``a_k' = k w b_k``, ``b_k' = -k w a_k``, ``a_0' = 0``; `x` shape ``(..., 2H+1)``."""
+    x = xp.asarray(x)
+    k = omega * xp.asarray(np.arange(1, harmonics + 1, dtype=float))
+    pairs = xp.stack([k * x[..., 2::2], -k * x[..., 1::2]], axis=-1).reshape(x.shape[:-1] + (2 * harmonics,))
+    return xp.concatenate([0.0 * x[..., :1], pairs], axis=-1)
 
 
 def convolution_matrix(p, harmonics: int, xp=np):

@@ -23,6 +23,11 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 Jacobians come from ``jax.jacfwd``: with respect to ``X`` and to the parameter ``p``.
 The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 ``D2 = M (x) I`` and ``D1 = 2 M (x) D + dR/d(velocity coefficients)``.
+
+Many harmonics: from :data:`STRUCTURED_MIN_SIZE` unknowns on, :meth:`HarmonicBalance.prepare`
+builds the structured path instead (:mod:`hbgear.engine.structured`: the same residual by FFT
+products, Newton steps by preconditioned GMRES, no ``(size x size)`` array);
+:meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose.
 """
 
 from __future__ import annotations
@@ -36,11 +41,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import fourier
-from .quadrature import mesh_period_rule
+from . import fourier, structured
+from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 
 
-__all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions"]
+__all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions",
+           "STRUCTURED_MIN_SIZE"]
+
+#: From this many unknowns ``n (2H+1)`` on, ``operator="auto"`` takes the structured path
+#: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the mean-Jacobian preconditioner,
+#: no ``(size x size)`` array); below it the dense Jacobian and its LU. Measured on the NLTV gear
+#: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores, one BLAS thread), one
+#: Newton step dense / structured: 0.9 / 2.7 ms at 258 unknowns (H = 64), 6.2 / 6.4 ms at 514,
+#: 36.6 / 7.9 ms at 1026, 274 / 15 ms at 2050 (an earlier run: 1.1 / 2.6, 3.7 / 6.5, 30.5 / 8.7,
+#: 181 / 14 ms): the crossover lies between 514 and 1026 unknowns. Below
+#: it the dense step is also exact and Hill's method and continuation, which need the dense
+#: Jacobian, keep their frozen matrices; above it the dense LU grows like size^3, its matrices
+#: like size^2.
+STRUCTURED_MIN_SIZE = 1000
 
 
 class ForcingPieces(NamedTuple):
@@ -84,8 +102,10 @@ class Prepared(NamedTuple):
     compiled functions as an argument).
 
     **Fields:** `nodes` ``(n,)`` mesh phases of the quadrature rule; `kernel_cos`, `kernel_sin`
-    ``(R+1, n)`` its Fourier kernel with the weights folded in; `frozen` the parameter-independent
-    operator (or ``None``); `jumps` the jump layout (or ``None``: built in the trace).
+    ``(R+1, n)`` its Fourier kernel with the weights folded in (``None`` on the structured path);
+    `frozen` the parameter-independent dense operator (or ``None``); `jumps` the jump layout (or
+    ``None``: built in the trace); `structured` the pieces of the structured path
+    (:class:`~hbgear.engine.structured.StructuredOperator`, or ``None``: the dense path).
     """
 
     nodes: Any
@@ -93,11 +113,21 @@ class Prepared(NamedTuple):
     kernel_sin: Any
     frozen: FrozenOperator | None = None
     jumps: JumpLayout | None = None
+    structured: structured.StructuredOperator | None = None
 
     @property
     def rule(self):
-        """``(nodes, kernel_cos, kernel_sin)``."""
+        """``(nodes, kernel_cos, kernel_sin)``, or the :class:`~hbgear.engine.quadrature.LatticeRule`
+        of the structured path (its first entry the nodes too)."""
+        if self.structured is not None:
+            return self.structured.lattice
         return self.nodes, self.kernel_cos, self.kernel_sin
+
+    @property
+    def forcing_pieces(self) -> ForcingPieces | None:
+        """The frozen forcing pieces of either path (or ``None``: quadrature at every call)."""
+        holder = self.structured if self.structured is not None else self.frozen
+        return None if holder is None else holder.forcing
 
 
 @dataclass(frozen=True)
@@ -105,15 +135,21 @@ class HarmonicBalance:
     """Discretisation settings; methods take the system (a pytree) and the parameter.
 
     **Arguments:** `ndof`: coordinates; `harmonics`: ``H``; `nu`: 1 (harmonics of the
-    excitation) or 2 (adds half orders); `samples`: AFT samples per base period ``N``.
+    excitation) or 2 (adds half orders); `samples`: AFT samples per base period ``N``;
+    `operator`: ``"dense"`` (Jacobian matrices, LU), ``"structured"`` (FFT products and GMRES,
+    :mod:`hbgear.engine.structured`) or ``"auto"`` (structured from :data:`STRUCTURED_MIN_SIZE`
+    unknowns on).
     """
 
     ndof: int
     harmonics: int
     nu: int = 1
     samples: int = 256
+    operator: str = "auto"
 
     def __post_init__(self):
+        if self.operator not in ("auto", "dense", "structured"):
+            raise ValueError(f"operator must be 'auto', 'dense' or 'structured', got {self.operator!r}")
         if self.samples < 2 * self.harmonics + 2:
             raise ValueError(f"samples ({self.samples}) must be >= 2 H + 2 = {2 * self.harmonics + 2}")
         if self.samples % self.nu:
@@ -126,6 +162,11 @@ class HarmonicBalance:
     @property
     def size(self) -> int:
         return self.ndof * self.block
+
+    @property
+    def structured(self) -> bool:
+        """Whether :meth:`prepare` builds the structured path (:attr:`operator`, size rule)."""
+        return self.operator == "structured" or (self.operator == "auto" and self.size >= STRUCTURED_MIN_SIZE)
 
     def base_frequency(self, system, p):
         return system.excitation_frequency(p) / self.nu
@@ -148,7 +189,10 @@ class HarmonicBalance:
         (Newton, continuation) prepares once and passes the result to every evaluation.
 
         Under a trace of the system itself (an outer ``jit``/``vmap`` over systems) the rule is
-        built in the trace and nothing is frozen.
+        built in the trace and nothing is frozen (the dense path, whatever the size). On the
+        structured path (:attr:`structured`) no kernel and no dense operator are built: the
+        rule's structure (:func:`~hbgear.engine.quadrature.lattice_rule`) and, when frozen,
+        the periodic coefficients (:func:`~hbgear.engine.structured.prepare_structured`).
         """
         if _has_tracer((system, p)):
             s, w = mesh_period_rule(system.breakpoints(p, jnp), self.max_mesh_order, jnp)
@@ -157,6 +201,13 @@ class HarmonicBalance:
         # concrete arrays even when first asked for inside a trace (a compiled caller's first
         # call): the caches must never hold tracers
         with jax.ensure_compile_time_eval():
+            if self.structured:
+                breakpoints = _breakpoint_key(system, p)
+                lattice = _RULES.get_or_make((breakpoints, self.max_mesh_order, "lattice"),
+                                             lambda: self._lattice(system, p))
+                pieces = _FROZEN.get_or_make(self._content_key(system, "structured", breakpoints),
+                                             lambda: structured.prepare_structured(self, system, p, *lattice))
+                return Prepared(pieces.lattice.nodes, None, None, None, self._frozen_jumps(system), pieces)
             rule = _RULES.get_or_make((_breakpoint_key(system, p), self.max_mesh_order),
                                       lambda: self._rule(system, p))
             return Prepared(*rule, self._frozen_operator(system, p, rule), self._frozen_jumps(system))
@@ -167,6 +218,12 @@ class HarmonicBalance:
         phase = 2 * np.pi * np.outer(np.arange(self.max_mesh_order + 1), s)
         return tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
 
+    def _lattice(self, system, p):
+        """The :class:`~hbgear.engine.quadrature.LatticeRule` of :meth:`_rule`'s nodes, in numpy and
+        as device arrays."""
+        rule = lattice_rule(np.asarray(_breakpoint_key(system, p)), self.max_mesh_order)
+        return rule, jax.device_put(rule)  # no compiled copy per array (jnp.asarray here: one each)
+
     def _frozen_jumps(self, system) -> JumpLayout | None:
         """The jump layout of :meth:`_sample_points` (device arrays) when the breakpoints do not
         depend on the parameter, else ``None``. Given with the prepared pieces, a compiled caller
@@ -174,7 +231,7 @@ class HarmonicBalance:
         sawtooth signals) at every residual evaluation."""
         if not system.coefficients_independent_of_parameter:
             return None
-        return JumpLayout(*(jnp.asarray(a) for a in self._jump_layout(system, 1.0)))
+        return JumpLayout(*jax.device_put(tuple(self._jump_layout(system, 1.0))))
 
     def _frozen_operator(self, system, p, rule) -> FrozenOperator | None:
         """The parameter-independent pieces of the linear operator, when the system declares them so.
@@ -192,8 +249,7 @@ class HarmonicBalance:
         """
         if not system.coefficients_independent_of_parameter:
             return None
-        leaves, treedef = jax.tree_util.tree_flatten(system)
-        key = (self, treedef, tuple(np.asarray(leaf).tobytes() for leaf in leaves), rule[0].shape)
+        key = self._content_key(system, rule[0].shape)
 
         def make():
             # in numpy: a one-off computation of a few ms, which compiled for ~2 s in XLA
@@ -202,6 +258,11 @@ class HarmonicBalance:
             return FrozenOperator(*blocks, self._forcing_pieces(system, rule_np))
 
         return _FROZEN.get_or_make(key, make)
+
+    def _content_key(self, system, *more) -> tuple:
+        """A hashable key of this discretisation and the system's content (its leaves' bytes)."""
+        leaves, treedef = jax.tree_util.tree_flatten(system)
+        return (self, treedef, tuple(np.asarray(leaf).tobytes() for leaf in leaves)) + more
 
     def _forcing_pieces(self, system, rule) -> ForcingPieces | None:
         r"""Pieces of the forcing vector when it is affine in the excitation frequency up to a
@@ -233,7 +294,7 @@ class HarmonicBalance:
         error = np.max(np.abs(self._combined_forcing(system, 2.0, pieces, np) - f_c))
         if not (np.isfinite(error) and error <= 1e-11 * (np.max(np.abs(f_c)) + 1e-300)):
             return None  # the declared structure does not hold: full quadrature every call
-        return ForcingPieces(*(jnp.asarray(a) for a in pieces))
+        return ForcingPieces(*jax.device_put(tuple(np.asarray(a) for a in pieces)))
 
     def _point_forcing(self, system, p, s_star, xp=jnp):
         zero = xp.zeros((self.ndof, 1))
@@ -264,11 +325,12 @@ class HarmonicBalance:
 
         ``Q_lin`` is affine in ``(q, q')``, so probing it at ``0`` and at unit vectors gives its
         coefficients exactly; one vmapped evaluation over the probes at all quadrature nodes
-        (a loop over them in numpy). `rule`: ``(nodes, kernel_cos, kernel_sin)``;
+        (a loop over them in numpy). `rule`: ``(nodes, kernel_cos, kernel_sin)`` or a
+        :class:`~hbgear.engine.quadrature.LatticeRule` (chirp transforms instead of the kernel);
         `forcing_only`: probe at 0 alone (the stiffness and damping returned are then empty).
         """
         n, H, nu = self.ndof, self.harmonics, self.nu
-        s, kernel_cos, kernel_sin = rule[:3]
+        s = rule[0]
         eye = xp.zeros((0, n)) if forcing_only else xp.eye(n)
         probes_q = xp.concatenate([xp.zeros((1, n)), eye, xp.zeros_like(eye)])
         probes_v = xp.concatenate([xp.zeros((1, n)), xp.zeros_like(eye), eye])
@@ -281,7 +343,10 @@ class HarmonicBalance:
             values = np.stack([np.asarray(force(a, b), dtype=float) for a, b in zip(probes_q, probes_v)])
         else:
             values = jax.vmap(force)(probes_q, probes_v)  # (1+2n, n, nodes)
-        coeff = values @ kernel_cos.T - 1j * (values @ kernel_sin.T)
+        if isinstance(rule, LatticeRule):
+            coeff = lattice_coefficients(values, rule, xp)
+        else:
+            coeff = values @ rule[1].T - 1j * (values @ rule[2].T)
         coeff = fourier.mesh_to_base(coeff, nu, 2 * H + 1, xp)  # (1+2n, n, 2H+1)
         forcing = coeff[0]
         stiffness = xp.transpose(forcing[None] - coeff[1 : 1 + n], (1, 0, 2))  # (n_row, n_col, .)
@@ -312,17 +377,32 @@ class HarmonicBalance:
         if frozen is not None:
             w = self.base_frequency(system, p)
             return frozen.a0 + w * frozen.a1 + w**2 * frozen.a2, self._forcing(system, p, prepared), frozen.damping
-        forcing, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
-        forcing = fourier.coefficients_to_real(forcing, H, jnp).reshape(self.size)
+        forcing, stiffness, damping = self._coefficients(system, p, prepared)
         k_conv = fourier.convolution_matrix(stiffness, H, jnp)  # (n, n, B, B)
         c_conv = fourier.convolution_matrix(damping, H, jnp)
-        d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
+        w = self.base_frequency(system, p)
         mass = system.mass_matrix(p, jnp)
-        op = mass[:, :, None, None] * (d @ d)[None, None] + k_conv + c_conv @ d[None, None]
+        # C D and D^2 without the (B x B) products (O(B^3) per block): D moves and scales columns,
+        # D^2 is diagonal, -(k w)^2 on a_k and b_k; the same numbers as the products
+        kw = w * jnp.arange(1, H + 1)
+        d2 = jnp.diag(jnp.concatenate([jnp.zeros(1), jnp.repeat(kw * -kw, 2)]))
+        op = mass[:, :, None, None] * d2[None, None] + k_conv - fourier.differentiate(c_conv, H, w, jnp)
         return self._flatten(op), forcing, self._flatten(c_conv)
 
+    def _coefficients(self, system, p, prepared):
+        """``(F, K, C)``: the forcing vector (real, SI) and the complex coefficients ``(n, n, 2H+1)``
+        of ``K(s)``, ``C(s)``: those the structured path keeps when frozen, else by quadrature."""
+        pieces = prepared.structured
+        if pieces is not None and pieces.stiffness is not None:
+            return self._forcing(system, p, prepared), pieces.stiffness, pieces.damping
+        forcing, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
+        return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size), stiffness, damping
+
     def _linear_response(self, x, p, system, prepared):
-        """``L x - F`` in SI; with the frozen pieces as three matrix-vector products."""
+        """``L x - F`` in SI; with the frozen pieces as three matrix-vector products, on the
+        structured path as FFT products (:func:`~hbgear.engine.structured.linear_response`)."""
+        if prepared.structured is not None:
+            return structured.linear_response(self, x, p, system, prepared)
         frozen = prepared.frozen
         if frozen is None:
             lin, forcing, _ = self.linear_operator(system, p, prepared)
@@ -333,8 +413,8 @@ class HarmonicBalance:
     def _forcing(self, system, p, prepared):
         """The forcing vector ``F`` (real coefficients, SI): combined from the frozen pieces when
         there are some (:meth:`_forcing_pieces`), else by quadrature."""
-        if prepared.frozen is not None and prepared.frozen.forcing is not None:
-            return self._combined_forcing(system, p, prepared.frozen.forcing)
+        if prepared.forcing_pieces is not None:
+            return self._combined_forcing(system, p, prepared.forcing_pieces)
         forcing, _, _ = self._periodic_coefficients(system, p, prepared.rule)
         return fourier.coefficients_to_real(forcing, self.harmonics, jnp).reshape(self.size)
 
@@ -438,8 +518,8 @@ class HarmonicBalance:
         return sides, at_c, xp.tile(weight, nu), exact - fourier.project(sawtooth, H, xp)
 
     def _velocity(self, x, system, p):
-        d = fourier.derivative_matrix(self.harmonics, self.base_frequency(system, p), jnp)
-        return (x.reshape(self.ndof, self.block) @ d.T).reshape(self.size)
+        return fourier.differentiate(x.reshape(self.ndof, self.block), self.harmonics, self.base_frequency(system, p),
+                                     jnp).reshape(self.size)
 
     def _residual(self, z, p, system, prepared, operator=None):
         x, extra = self._split(system, z)
@@ -469,6 +549,17 @@ class HarmonicBalance:
         return self._residual_and_jacobians_jit(z, p, system,
                                                 self.prepare(system) if prepared is None else prepared)
 
+    def residual_and_linearization(self, z, p, system, prepared=None):
+        """``(R, J)`` for Newton at fixed ``p``: ``J`` the dense ``dR/dz`` (the dense path, the same
+        evaluation as :meth:`residual_and_jacobians`) or, on the structured path, a
+        :class:`~hbgear.engine.structured.StructuredJacobian` (products and preconditioned GMRES
+        solves, no matrix); which one, the prepared pieces say (:attr:`structured`)."""
+        prepared = self.prepare(system) if prepared is None else prepared
+        if prepared.structured is None:
+            r, jac, _ = self._residual_and_jacobians_jit(z, p, system, prepared)
+            return r, jac
+        return structured.linearize(self, z, p, system, prepared)
+
     def hill_matrices(self, z, p, system, prepared=None):
         """``(J, D1, D2)`` of the Hill eigenproblem at a solution (mean unpinned), scaled.
 
@@ -493,9 +584,24 @@ class HarmonicBalance:
         derivatives at the jump phases.
         """
         n, H, N = self.ndof, self.harmonics, self.samples
+        uses_q = system.nonlinear_force_uses_displacement
+        derivatives, (_, at_c, weight, delta) = self._nonlinear_derivatives(x, extra, p, system, layout)
+        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
+        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, n, B, B)
+        # the jump terms: J_c depends on the state at t_c only, x(t_c) = x @ at_c.T
+        jumps = _jumps(derivatives[..., N:], weight)  # (1|2, n, n, C)
+        blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, jumps, at_c)
+        t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
-        velocity = (x.reshape(n, self.block) @ d.T).ravel()
-        s, q, qd, (_, at_c, weight, delta) = self._sample_points(x, velocity, system, p, layout)
+        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
+
+    def _nonlinear_derivatives(self, x, extra, p, system, layout=None):
+        """``(G, layout)``: the pointwise derivatives of ``Q_nl`` at the sample points of
+        :meth:`_sample_points` (``N`` uniform, then the ``2C`` jump sides), shape
+        ``(1|2, n_row, n_col, N + 2C)`` (``dQ/dq`` first when the system uses it, then
+        ``dQ/dq'``), from ``n`` directional derivatives each; `layout` the jump layout used."""
+        n = self.ndof
+        s, q, qd, layout = self._sample_points(x, self._velocity(x, system, p), system, p, layout)
 
         def f(qq, vv):
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
@@ -503,18 +609,10 @@ class HarmonicBalance:
         eye = jnp.eye(n)
         dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[j][:, None], qd.shape),))[1] for j in range(n)], axis=1)
         derivatives = [dv]
-        uses_q = system.nonlinear_force_uses_displacement
-        if uses_q:
+        if system.nonlinear_force_uses_displacement:
             dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
             derivatives.insert(0, dq)
-        derivatives = jnp.stack(derivatives)  # (1|2, n_row, n_col, N + 2C)
-        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N  # (1|2, n, n, 2H+1)
-        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, n, B, B)
-        # the jump terms: J_c depends on the state at t_c only, x(t_c) = x @ at_c.T
-        jumps = _jumps(derivatives[..., N:], weight)  # (1|2, n, n, C)
-        blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, jumps, at_c)
-        t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
-        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
+        return jnp.stack(derivatives), layout
 
     def _times_derivative(self, a, system, p):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times

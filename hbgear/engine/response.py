@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import ConvergenceError
+from . import fourier
 from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doubling
 from .continuation import Branch, Status, continuation, sweep_method
 from .floquet import hill_multipliers, period_doubling
@@ -35,13 +36,6 @@ def default_samples(harmonics: int, nu: int = 1) -> int:
     """AFT samples per base period when none are given: ``max(1024, 4 H nu + 2)``, a multiple of ``nu``."""
     samples = max(1024, 4 * harmonics * nu + 2)
     return samples + samples % nu
-
-
-def _dense_grid(harmonics: int):
-    """``cos(k tau)``, ``sin(k tau)`` on ``16 H + 1`` points of the base period (extremes between nodes)."""
-    tau = 2 * np.pi * np.linspace(0.0, 1.0, 16 * harmonics + 1)
-    k = np.arange(1, harmonics + 1)
-    return np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau))
 
 
 @dataclass(frozen=True)
@@ -94,9 +88,17 @@ class PeriodicSolution:
         k = np.arange(1, self.harmonics + 1)
         return synthesize(self.coefficients, self.base_frequency, np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau)))
 
+    def state_on_grid(self, points: int):
+        """``(q, q')`` at the base-period fractions ``j / points``, ``j < points``, shapes
+        ``(ndof, points)``: :meth:`state_at` on a uniform grid by FFT (``points >= 2H + 2``)."""
+        if points < 2 * self.harmonics + 2:
+            return self.state_at(np.arange(points) / points)
+        velocity = fourier.differentiate(self.coefficients, self.harmonics, self.base_frequency)
+        return tuple(fourier.synthesize(c, self.harmonics, points) for c in (self.coefficients, velocity))
+
     def max_abs(self, coordinate: int) -> float:
-        """``max |q_i(t)|`` over one base period (on ``16 H + 1`` points)."""
-        q, _ = synthesize(self.coefficients[coordinate:coordinate + 1], 0.0, *_dense_grid(self.harmonics))
+        """``max |q_i(t)|`` over one base period (on ``16 H`` uniform points, by FFT)."""
+        q = fourier.synthesize(self.coefficients[coordinate], self.harmonics, 16 * self.harmonics)
         return float(np.max(np.abs(q)))
 
     def with_multipliers(self, multipliers) -> PeriodicSolution:
@@ -122,8 +124,11 @@ def newton_solve(hb: HarmonicBalance, system, p: float, z0, *, tolerance: float 
                  prepared=None):
     """Damped Newton (:func:`hbgear.engine.newton.newton`) on the harmonic-balance residual at `p`.
 
-    The evaluation is the continuation's ``(R, dR/dz, dR/dp)`` with ``dR/dp`` dropped: a start
-    solution followed by a curve then compiles one Jacobian function, not two.
+    On the dense path the evaluation is the continuation's ``(R, dR/dz, dR/dp)`` with ``dR/dp``
+    dropped (a start solution followed by a curve then compiles one Jacobian function, not two);
+    on the structured path (many harmonics: the size decides,
+    :attr:`~hbgear.engine.hb.HarmonicBalance.structured`) the matrix-free linearisation, its
+    steps by GMRES (a linear system's to the tolerance at once: one step).
     **Returns:** the :class:`~hbgear.engine.newton.NewtonResult`.
     """
     import jax.numpy as jnp
@@ -131,12 +136,14 @@ def newton_solve(hb: HarmonicBalance, system, p: float, z0, *, tolerance: float 
     prepared = hb.prepare(system) if prepared is None else prepared
 
     def both(z):
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system, prepared)[:2]
+        return hb.residual_and_linearization(jnp.asarray(z), p, system, prepared)
 
     def resid(z):
         return hb.residual(jnp.asarray(z), p, system, prepared)
 
-    return newton(both, resid, np.asarray(z0, dtype=float), tolerance=tolerance, max_iterations=max_iterations)
+    linear_rtol = 0.1 * tolerance if system.is_linear else None
+    return newton(both, resid, np.asarray(z0, dtype=float), tolerance=tolerance, max_iterations=max_iterations,
+                  linear_rtol=linear_rtol)
 
 
 def solve(system, parameter: float, *, harmonics: int, nu: int = 1, samples: int | None = None,
@@ -171,12 +178,19 @@ def solve(system, parameter: float, *, harmonics: int, nu: int = 1, samples: int
 
 def solution_multipliers(hb, system, z, p):
     """Floquet multipliers over the base period of one solution: exact monodromy where the system's
-    linearization holds along it, else Hill's method."""
+    linearization holds along it, else Hill's method where the discretisation is dense, and the
+    variational equations on the structured path (many harmonics: Hill's matrices would be
+    ``(size x size)`` and its eigenproblem ``O(size^3)``; the variational equations cost the same
+    at any ``H``, the solution entering only through its state along the period)."""
     linear = system.linearization()
     if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):
         from .monodromy import multipliers_linear
 
         return np.asarray(multipliers_linear(linear, float(p))) ** hb.nu
+    if hb.structured:
+        from .monodromy import variational_multipliers
+
+        return variational_multipliers(hb, system, z, float(p))
     return np.asarray(hill_multipliers(hb, z, float(p), system))
 
 
@@ -253,10 +267,9 @@ class FrequencyResponse:
         return self.branch.fold_p
 
     def max_abs(self, coordinate: int) -> np.ndarray:
-        """``max |q_i(t)|`` over one base period at every point (on ``16 H + 1`` points each)."""
+        """``max |q_i(t)|`` over one base period at every point (on ``16 H`` uniform points each, by FFT)."""
         c = self.coefficients.reshape(len(self), self.system.ndof, -1)[:, coordinate]
-        q, _ = synthesize(c, 0.0, *_dense_grid(self.hb.harmonics))
-        return np.max(np.abs(q), axis=-1)
+        return np.max(np.abs(fourier.synthesize(c, self.hb.harmonics, 16 * self.hb.harmonics)), axis=-1)
 
     def solution(self, i: int) -> PeriodicSolution:
         """Point `i` as a :class:`PeriodicSolution`."""

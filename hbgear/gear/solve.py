@@ -24,7 +24,7 @@ from ..engine.response import PeriodicSolution as EnginePeriodicSolution
 from ..engine.response import newton_solve, synthesize
 from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
-from ..engine.quadrature import mesh_period_rule
+from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -72,7 +72,7 @@ class PeriodicSolution(EnginePeriodicSolution):
 
     def quadrature(self):
         """Nodes (base fractions, mesh phases) and weights over one base period."""
-        base, s, w, _, _ = _read_out_rule(_breakpoint_key(GearSystem(self.model), self.omega_pinion), self.harmonics,
+        base, s, w, _ = _read_out_rule(_breakpoint_key(GearSystem(self.model), self.omega_pinion), self.harmonics,
                                           self.nu)
         return base, s, w
 
@@ -116,12 +116,13 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
     [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]
-    _, s, w, cos, sin = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
+    _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
-    q, qd = _synthesize(coefficients, base_frequency, cos, sin)
+    q, qd = _node_states(coefficients, base_frequency, basis, nu)
     out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
                            np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
-    dense = _synthesize(coefficients[:, :1], 0.0, *_dense_basis(harmonics))[0][:, 0]
+    # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
+    dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
     out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
     out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
     return out
@@ -144,6 +145,20 @@ def _impulse_power(model, omegas, coefficients, harmonics, nu):
     return (velocity @ np.tile(impulse, nu)) * base_frequency[:, 0] / (2 * np.pi)
 
 
+def _node_states(coefficients, base_frequency, basis, nu: int):
+    """``(q, qd)`` at the read-out rule's nodes (:func:`_read_out_rule`), shapes ``(..., ndof, nodes)``:
+    from the trigonometric basis ``(cos, sin)``, or by chirp transforms from a lattice rule (the
+    nodes of base period ``j`` of ``nu`` at ``(j + s) / nu``)."""
+    if not isinstance(basis, LatticeRule):
+        return _synthesize(coefficients, base_frequency, *basis)
+    c = np.asarray(coefficients, dtype=float)
+    k = np.arange(c.shape[-1] // 2 + 1)
+    position = np.concatenate([c[..., :1], c[..., 1::2] - 1j * c[..., 2::2]], axis=-1)  # x = Re sum c_k e^{i k tau}
+    both = np.stack([position, 1j * k * position])  # one synthesis for q and q'
+    states = np.concatenate([lattice_synthesis(both, basis, j / nu, 1.0 / nu) for j in range(nu)], axis=-1)
+    return states[0], base_frequency * states[1]
+
+
 #: Points per batch of :func:`read_outs` (bounds the work arrays to a few tens of MB).
 READ_OUT_BATCH = 512
 
@@ -160,25 +175,25 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
     return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
 
 
-@lru_cache(maxsize=16)
-def _dense_basis(harmonics: int):
-    """``cos(k tau)``, ``sin(k tau)`` on ``16 H + 1`` uniform points of the base period (the
-    peak-to-peak read-out between quadrature nodes); cached, read-only."""
-    tau = 2 * np.pi * np.linspace(0.0, 1.0, 16 * harmonics + 1)
-    k = np.arange(1, harmonics + 1)
-    cos, sin = np.cos(np.outer(k, tau)), np.sin(np.outer(k, tau))
-    cos.flags.writeable = sin.flags.writeable = False
-    return cos, sin
+#: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by
+#: chirp transforms (:func:`~hbgear.engine.quadrature.lattice_synthesis`) instead of a
+#: trigonometric basis of ``H x ~34 H / nu`` entries (36 MB at H = 256, 2.3 GB at H = 2048).
+READ_OUT_LATTICE_HARMONICS = 128
 
 
 @lru_cache(maxsize=32)
 def _read_out_rule(breakpoints: tuple, harmonics: int, nu: int):
-    """Quadrature over one base period for read-outs, with its trigonometric basis (cached per geometry)."""
-    s, w = mesh_period_rule(np.asarray(breakpoints), 2 * harmonics // nu + 8)
-    s, w = np.asarray(s), np.asarray(w)
+    """Quadrature over one base period for read-outs, with what synthesises a solution at its
+    nodes (cached per geometry): ``(base, s, w, basis)``, `basis` the trigonometric basis
+    ``(cos, sin)`` or, from :data:`READ_OUT_LATTICE_HARMONICS` on, the lattice rule."""
+    order = 2 * harmonics // nu + 8
+    lattice = lattice_rule(np.asarray(breakpoints), order, coefficients=False)
+    s, w = lattice.nodes, lattice.weights  # those of mesh_period_rule(breakpoints, order)
     base = np.concatenate([(j + s) / nu for j in range(nu)])
+    if harmonics >= READ_OUT_LATTICE_HARMONICS:
+        return base, np.tile(s, nu), np.tile(w, nu) / nu, lattice
     tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
-    return base, np.tile(s, nu), np.tile(w, nu) / nu, np.cos(tau), np.sin(tau)
+    return base, np.tile(s, nu), np.tile(w, nu) / nu, (np.cos(tau), np.sin(tau))
 
 
 def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
@@ -188,6 +203,12 @@ def _problem(model: GearPairModel, harmonics: int, nu: int, samples: int):
 
 def _newton(hb, system, omega, z0, tolerance, max_iterations):
     return newton_solve(hb, system, omega, z0, tolerance=tolerance, max_iterations=max_iterations)
+
+
+def _steps(result) -> str:
+    """How many Newton steps (and GMRES products, on the structured path) a result took."""
+    krylov = f", {result.linear_iterations} GMRES products" if result.linear_iterations else ""
+    return f"{result.iterations} iterations{krylov}"
 
 
 _STATIC_START_ITERATIONS = 10
@@ -250,13 +271,14 @@ def solve_periodic(
     if model.is_linear:
         z = guess if z0 is None else np.asarray(z0)
         result = _newton(hb, system, omega, z, tolerance, 3)
-        tried.append("direct linear solve")
+        tried.append("direct linear solve" + (f" ({result.linear_iterations} GMRES products)"
+                                              if result.linear_iterations else ""))
     else:
         result = None
         if guess is not None:
             z0 = guess
             result = _newton(hb, system, omega, z0, tolerance, min(max_iterations, _STATIC_START_ITERATIONS))
-            tried.append(f"Newton from the quasi-static state ({result.iterations} iterations)")
+            tried.append(f"Newton from the quasi-static state ({_steps(result)})")
             z0 = z0 if result.converged else None
         if result is None or not result.converged:
             start_name = "given"
@@ -269,7 +291,7 @@ def solve_periodic(
                     z0[0] += 0.5 * float(model.backlash_m) / float(system.displacement_scale)
                 start_name = "LTV"
             result = _newton(hb, system, omega, z0, tolerance, max_iterations)
-            tried.append(f"Newton from the {start_name} start ({result.iterations} iterations)")
+            tried.append(f"Newton from the {start_name} start ({_steps(result)})")
         name = _smoothing_field(model)
         if not result.converged and name is not None:
             target = getattr(model.friction, name)

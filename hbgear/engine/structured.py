@@ -1,0 +1,267 @@
+r"""The structured path of harmonic balance: the residual and its Jacobian as FFT products,
+Newton steps by preconditioned GMRES, no ``(size x size)`` array (many harmonics).
+
+With ``X`` the coefficients (``n`` coordinates, ``B = 2H+1`` each), ``E_M``/``P_M`` synthesis
+on / projection from ``M > 4H`` uniform samples, ``D1`` the derivative at unit frequency
+(:func:`hbgear.engine.fourier.differentiate`, no matrix) and ``w`` the base frequency, the
+linear periodic part of :mod:`hbgear.engine.hb` is applied as
+
+    L(w) X = P_M [K(t) E_M X + w C(t) E_M D1 X] + w^2 (M (x) D1^2) X
+
+with ``K(t)``, ``C(t)`` the trigonometric polynomials of degree ``2H`` of the exact
+coefficients ``p_0 .. p_2H`` (the entries of the dense convolution matrices): the product
+has degree ``3H``, so ``M > 4H`` samples project it onto the harmonics ``<= H`` without
+aliasing, and this *is* ``(K_conv + w C_conv D1 + w^2 M D1^2) X`` to rounding, in
+``O(n^2 M log M)`` instead of ``O(size^2)``. The coefficients themselves come from the same
+quadrature as the dense path's by chirp transforms (:func:`~hbgear.engine.quadrature.lattice_coefficients`)
+instead of an ``(orders x nodes)`` kernel.
+
+The Jacobian of the AFT term is ``P diag(G) E`` (``G`` the pointwise derivatives of ``Q_nl``
+at the ``N`` samples, plus the jump corrections at the breakpoints), applied as such:
+
+    J V = (xs/fs) [L(w) V' - P_N (G_q E_N V' + G_v E_N w D1 V') - delta^T (J_q at_c V' + J_v at_c w D1 V')] + e_k V_k
+
+(``V'`` the direction with the free mean slot ``k`` zeroed, ``J_*`` the jumps of ``G`` at the
+breakpoints): exactly the derivative of the residual, the dense Jacobian's product to
+rounding. **Preconditioner:** the mean (time-averaged) Jacobian, which couples no harmonics:
+per harmonic ``k >= 1`` on ``(a_k, b_k)`` of all coordinates
+
+    [[Kb - (k w)^2 M - Gb_q,  k w (Cb - Gb_v)], [-k w (Cb - Gb_v),  Kb - (k w)^2 M - Gb_q]]
+
+(bars: means over the period), ``Kb - Gb_q`` for ``k = 0``; ``H + 1`` blocks of ``2n x 2n``,
+inverted once per linearisation (``O(H n^3)``). GMRES (:mod:`hbgear.engine.krylov`) solves
+``J s = -R`` with it on the right, to the relative residual the Newton iteration asks for
+(:func:`hbgear.engine.newton.newton`: inexact Newton, Eisenstat--Walker forcing terms).
+
+The harmonic-balance object decides by size (:attr:`hbgear.engine.hb.HarmonicBalance.structured`).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.fft
+
+from . import fourier
+from .krylov import KrylovInfo, gmres
+
+__all__ = ["StructuredOperator", "Linearization", "StructuredJacobian", "prepare_structured", "product_samples",
+           "linear_response", "linearize"]
+
+#: GMRES settings of a Newton step: Krylov vectors kept before a restart, products at most.
+RESTART = 80
+MAX_PRODUCTS = 800
+
+
+class StructuredOperator(NamedTuple):
+    """The prepared pieces of the structured path (a pytree of device arrays).
+
+    **Fields:** `lattice` the :class:`~hbgear.engine.quadrature.LatticeRule` of the quadrature;
+    when the system's coefficients do not depend on the parameter (else ``None``): `stiffness`,
+    `damping` the complex coefficients ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)``, their samples
+    `stiffness_samples`, `damping_samples` ``(n, n, M)`` on the product grid
+    (:func:`product_samples`), and `forcing` the :class:`~hbgear.engine.hb.ForcingPieces` (or
+    ``None``).
+    """
+
+    lattice: Any
+    stiffness: Any = None
+    damping: Any = None
+    stiffness_samples: Any = None
+    damping_samples: Any = None
+    forcing: Any = None
+
+
+class Linearization(NamedTuple):
+    """What a Jacobian product needs at one point (a pytree): the base frequency `w`, the mass
+    matrix `mass`, the samples `stiffness`, `damping` ``(n, n, M)``, the derivative samples
+    `derivatives` ``(1|2, n, n, N + 2C)`` (``None`` for a linear system), the jump layout's
+    `at_c`, `weight`, `delta`, the scale ``xs / fs`` and the inverted mean-Jacobian blocks
+    `inverse_mean` ``(n, n)`` and `inverse_blocks` ``(H, 2n, 2n)``."""
+
+    w: Any
+    mass: Any
+    stiffness: Any
+    damping: Any
+    derivatives: Any
+    at_c: Any
+    weight: Any
+    delta: Any
+    scale: Any
+    inverse_mean: Any
+    inverse_blocks: Any
+
+
+def product_samples(harmonics: int) -> int:
+    """``M``: the smallest FFT-friendly length above ``4H`` (exact products of degree ``2H`` by ``H``)."""
+    return scipy.fft.next_fast_len(4 * harmonics + 1, real=True)
+
+
+def prepare_structured(hb, system, p, lattice, device_lattice) -> StructuredOperator:
+    """The :class:`StructuredOperator` of `system` for the discretisation `hb`: the periodic
+    coefficients by the lattice quadrature (numpy, once) when they do not depend on the parameter.
+
+    **Arguments:** `lattice`, `device_lattice`: the rule in numpy and as device arrays.
+    """
+    if not system.coefficients_independent_of_parameter:
+        return StructuredOperator(device_lattice)
+    _, stiffness, damping = hb._periodic_coefficients(system, p, lattice, np)
+    samples = [_samples(c, hb.harmonics, np) for c in (stiffness, damping)]
+    return StructuredOperator(device_lattice, *jax.device_put((stiffness, damping, *samples)),
+                              hb._forcing_pieces(system, lattice))
+
+
+def _samples(coefficients, harmonics: int, xp=jnp):
+    """``K(t_j)`` on the product grid from its complex coefficients ``p_0 .. p_2H`` (``Im p_0`` dropped)."""
+    real = fourier.coefficients_to_real(coefficients, 2 * harmonics, xp)
+    return fourier.synthesize(real, 2 * harmonics, product_samples(harmonics), xp)
+
+
+def _operator_samples(hb, system, p, prepared):
+    """``(F, K(t_j), C(t_j))``: the forcing vector and the coefficient samples (kept, or by quadrature)."""
+    pieces = prepared.structured
+    forcing, stiffness, damping = hb._coefficients(system, p, prepared)
+    if pieces.stiffness_samples is not None:
+        return forcing, pieces.stiffness_samples, pieces.damping_samples
+    return forcing, _samples(stiffness, hb.harmonics), _samples(damping, hb.harmonics)
+
+
+def _apply_linear(hb, x, w, mass, stiffness, damping):
+    """``L(w) x`` in SI: ``P_M (K E_M x + w C E_M D1 x) + w^2 M D1^2 x``, `x` ``(n, B)``."""
+    H, samples = hb.harmonics, stiffness.shape[-1]
+    v1 = fourier.differentiate(x, H, 1.0, jnp)
+    u = jnp.einsum("ijt,jt->it", stiffness, fourier.synthesize(x, H, samples, jnp))
+    u = u + w * jnp.einsum("ijt,jt->it", damping, fourier.synthesize(v1, H, samples, jnp))
+    return fourier.project(u, H, jnp) + w**2 * (mass @ fourier.differentiate(v1, H, 1.0, jnp))
+
+
+def linear_response(hb, x, p, system, prepared):
+    """``L x - F`` in SI on the structured path (the dense path's :meth:`~hbgear.engine.hb.HarmonicBalance._linear_response`)."""
+    forcing, stiffness, damping = _operator_samples(hb, system, p, prepared)
+    w = hb.base_frequency(system, p)
+    lx = _apply_linear(hb, x.reshape(hb.ndof, hb.block), w, system.mass_matrix(p, jnp), stiffness, damping)
+    return lx.reshape(hb.size) - forcing
+
+
+def _apply_nonlinear(hb, x, lin: Linearization):
+    """``d(P Q_nl)/dx x`` in SI: ``P_N (G_q E_N x + G_v E_N w D1 x)`` plus the jump terms, `x` ``(n, B)``."""
+    H, N = hb.harmonics, hb.samples
+    directions = [fourier.differentiate(x, H, lin.w, jnp)]
+    if lin.derivatives.shape[0] == 2:
+        directions.insert(0, x)
+    u, jumps = 0.0, 0.0
+    for g, d in zip(lin.derivatives, directions):
+        u = u + jnp.einsum("ijt,jt->it", g[..., :N], fourier.synthesize(d, H, N, jnp))
+        count = lin.weight.shape[0]
+        jump = (g[..., N : N + count] - g[..., N + count :]) * lin.weight  # (n, n, C)
+        jumps = jumps + jnp.einsum("ijc,jc->ic", jump, d @ lin.at_c.T)
+    return fourier.project(u, H, jnp) + jumps @ lin.delta
+
+
+def _mean_blocks(hb, lin: Linearization, free_slot):
+    """The mean-Jacobian blocks (scaled): ``(n, n)`` for ``k = 0`` (the free mean slot's column
+    replaced by the unit column, as in the dense Jacobian) and ``(H, 2n, 2n)`` for ``k >= 1``."""
+    n, H, N = hb.ndof, hb.harmonics, hb.samples
+    k_bar, c_bar = jnp.mean(lin.stiffness, axis=-1), jnp.mean(lin.damping, axis=-1)
+    g_q = g_v = jnp.zeros((n, n))
+    if lin.derivatives is not None:
+        g_bar = jnp.mean(lin.derivatives[..., :N], axis=-1)
+        g_v = g_bar[-1]
+        g_q = g_bar[0] if g_bar.shape[0] == 2 else g_q
+    kw = lin.w * jnp.arange(1, H + 1)[:, None, None]
+    diagonal = (k_bar - g_q)[None] - kw**2 * lin.mass[None]
+    coupling = kw * (c_bar - g_v)[None]
+    blocks = jnp.concatenate([jnp.concatenate([diagonal, coupling], axis=2),
+                              jnp.concatenate([-coupling, diagonal], axis=2)], axis=1) * lin.scale
+    mean = (k_bar - g_q) * lin.scale
+    if free_slot is not None:
+        mean = mean.at[:, free_slot].set(0.0).at[free_slot, free_slot].set(1.0)
+    return mean, blocks
+
+
+@partial(jax.jit, static_argnums=0)
+def _linearize_jit(hb, z, p, system, prepared):
+    x, extra = hb._split(system, z)
+    _, stiffness, damping = _operator_samples(hb, system, p, prepared)
+    derivatives = at_c = weight = delta = None
+    if not system.is_linear:
+        derivatives, (_, at_c, weight, delta) = hb._nonlinear_derivatives(x, extra, p, system, prepared.jumps)
+    lin = Linearization(hb.base_frequency(system, p), system.mass_matrix(p, jnp), stiffness, damping, derivatives,
+                        at_c, weight, delta, system.displacement_scale / system.force_scale, None, None)
+    mean, blocks = _mean_blocks(hb, lin, system.free_mean_dof)
+    return lin._replace(inverse_mean=jnp.linalg.inv(mean), inverse_blocks=jnp.linalg.inv(blocks))
+
+
+def _product(hb, free_slot, lin: Linearization, v):
+    """``J v`` (scaled) at the linearisation `lin`."""
+    n, B = hb.ndof, hb.block
+    slot = None if free_slot is None else free_slot * B
+    direction = v if slot is None else v.at[slot].set(0.0)
+    x = direction.reshape(n, B)
+    out = _apply_linear(hb, x, lin.w, lin.mass, lin.stiffness, lin.damping)
+    if lin.derivatives is not None:
+        out = out - _apply_nonlinear(hb, x, lin)
+    out = out.reshape(hb.size) * lin.scale
+    return out if slot is None else out.at[slot].add(v[slot])
+
+
+def _precondition(hb, inverse_mean, inverse_blocks, v, xp=jnp):
+    """``Jbar^{-1} v``: one small solve per harmonic (the inverted mean-Jacobian blocks)."""
+    n, H = hb.ndof, hb.harmonics
+    x = v.reshape(n, hb.block)
+    pairs = xp.concatenate([x[:, 1::2].T, x[:, 2::2].T], axis=1)  # (H, 2n): a_k then b_k of every coordinate
+    solved = xp.einsum("kij,kj->ki", inverse_blocks, pairs)
+    out = xp.stack([solved[:, :n].T, solved[:, n:].T], axis=-1).reshape(n, 2 * H)
+    return xp.concatenate([(inverse_mean @ x[:, 0])[:, None], out], axis=1).reshape(hb.size)
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _product_jit(hb, free_slot, lin, v):
+    return _product(hb, free_slot, lin, v)
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _preconditioned_product_jit(hb, free_slot, lin, v):
+    return _product(hb, free_slot, lin, _precondition(hb, lin.inverse_mean, lin.inverse_blocks, v))
+
+
+class StructuredJacobian:
+    """``dR/dz`` at one point as products and preconditioned GMRES solves (:func:`linearize`).
+
+    **Methods:** :meth:`matvec` ``v -> J v``; :meth:`precondition` ``v -> Jbar^{-1} v``;
+    :meth:`solve` ``(b, rtol) -> (x, KrylovInfo)`` with ``||b - J x|| <= rtol ||b||``.
+    """
+
+    def __init__(self, hb, free_slot, lin: Linearization):
+        self.hb, self.free_slot, self.linearization = hb, free_slot, lin
+        self._inverses = None
+
+    def matvec(self, v) -> np.ndarray:
+        return np.asarray(_product_jit(self.hb, self.free_slot, self.linearization, jnp.asarray(v)))
+
+    def precondition(self, v) -> np.ndarray:
+        """In numpy (once per solve: not worth a compiled program of its own)."""
+        if self._inverses is None:
+            self._inverses = np.asarray(self.linearization.inverse_mean), np.asarray(self.linearization.inverse_blocks)
+        return _precondition(self.hb, *self._inverses, np.asarray(v, dtype=float), np)
+
+    def solve(self, b, rtol: float) -> tuple[np.ndarray, KrylovInfo]:
+        """GMRES(:data:`RESTART`) with the mean-Jacobian preconditioner on the right, at most
+        :data:`MAX_PRODUCTS` products; the best iterate and how far it got."""
+        def operator(v):  # J Jbar^{-1} v, one compiled call
+            return np.asarray(_preconditioned_product_jit(self.hb, self.free_slot, self.linearization, jnp.asarray(v)))
+
+        return gmres(operator, b, precondition=self.precondition, rtol=rtol, restart=RESTART,
+                     max_iterations=MAX_PRODUCTS)
+
+
+def linearize(hb, z, p, system, prepared):
+    """``(R, J)`` at ``(z, p)`` on the structured path: the residual (device array; the compiled
+    residual the line search uses too) and the :class:`StructuredJacobian` (derivative samples,
+    inverted blocks: one compiled evaluation)."""
+    r = hb._residual_jit(z, p, system, prepared)
+    return r, StructuredJacobian(hb, system.free_mean_dof, _linearize_jit(hb, z, p, system, prepared))
