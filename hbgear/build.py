@@ -24,9 +24,13 @@ from .gear.contact import (
     profile_modification,
 )
 from .gear.geometry import GearPair
+from .gear.kelley_lemanski import ROUGHNESS_CLIP_UIN, MICROINCH_PER_UM
 
 __all__ = ["ToothContact", "build_geometry", "build_model", "build_pair_stiffness", "build_tooth_contact",
            "check_config", "friction_law", "model_at_contact_ratio"]
+
+#: Largest Kelley-Lemanski roughness accepted [um]: where the roughness factor's guard starts.
+ROUGHNESS_MAX_UM = ROUGHNESS_CLIP_UIN / MICROINCH_PER_UM
 
 #: A working centre distance may sit this far [m] below the zero-backlash one (printed rounding).
 CENTER_DISTANCE_ROUNDING_M = 0.5e-6
@@ -141,8 +145,12 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
                           "(hbgear static-te takes every model)")
     geometry = build_geometry(cfg.gear, contact_ratio)
     k_min = _k_min(cfg, geometry, contact_ratio)
-    if fr.law == "kelley-lemanski" and fr.roughness_um >= 1.27:
-        raise ConfigError("friction.roughness_um", fr.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
+    if fr.law == "kelley-lemanski" and fr.roughness_um > ROUGHNESS_MAX_UM:
+        # C_R = 50/(50 - S) is held at S = 45 uin (C_R = 10) as a guard: above it the law would be
+        # silently clipped, so such a roughness is refused instead
+        raise ConfigError("friction.roughness_um", fr.roughness_um,
+                          f"a roughness <= {ROUGHNESS_MAX_UM:.4g} um for Kelley-Lemanski (C_R = 50/(50 - S) <= 10; "
+                          "it diverges at 1.27 um)")
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
