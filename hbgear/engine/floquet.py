@@ -149,12 +149,13 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
     return [_exponents_and_multipliers(mu, wk) for mu, wk in zip(mus, w)]
 
 
-def hill_follower(hb, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6):
+def hill_follower(hb, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6, predict: bool = True):
     """A :class:`hbgear.engine.hill.CentralFollower` for the branches of `system` discretised by
-    `hb` (for :func:`hill_exponents_along`)."""
+    `hb` (for :func:`hill_exponents_along`; `predict`: see there)."""
     from .hill import CentralFollower
 
-    return CentralFollower(hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial), copy_tol=copy_tol)
+    return CentralFollower(hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial), copy_tol=copy_tol,
+                           predict=predict)
 
 
 def hill_exponents_along(hb, zs, ps, system, follower=None, **kwargs):

@@ -920,13 +920,16 @@ class CentralFollower:
     no exponent within `zero_tol` of 0. Otherwise (the first point, a split or merger of real
     multipliers, a walk of more than one copy, a correction that fails) the point goes to
     :func:`central_exponents` and the families restart from its result. :meth:`reset` breaks the
-    chain (the next point is not a neighbour of the last).
+    chain (the next point is not a neighbour of the last). `predict`: each pair starts from its
+    value at the last point extrapolated linearly with the one before (points evenly spaced along
+    the branch), else from the last value (e.g. the iterates of a root finder).
 
     **Attributes:** `seeded`, `unseeded`: points settled each way so far.
     """
 
-    def __init__(self, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6):
+    def __init__(self, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6, predict: bool = True):
         self.ndof, self.harmonics, self.zero_tol, self.copy_tol = ndof, harmonics, zero_tol, copy_tol
+        self.predict = predict
         self.families: list[_Family] | None = None
         self.want = 0
         self.seeded = self.unseeded = 0
@@ -965,6 +968,9 @@ class CentralFollower:
         is not its own), or ``None``."""
         scratch = self._scratch
         members = [p for fam in self.families for p in ((fam.rep,) if fam.copy is None else (fam.rep, fam.copy))]
+        if not self.predict:
+            for pair in members:
+                pair.prev_mu = pair.prev_v = None
         if not _correct(members, abc, scratch):
             return None
         found: list[complex] = []

@@ -236,16 +236,16 @@ def multipliers_linear(system, ps, *, substeps: int | None = None, drop: bool = 
 # ============================================================================ variational
 
 
-_VARIATIONAL_RHS = None
+_VARIATIONAL_RHS: dict = {}
 
 
-def _variational_rhs():
+def _variational_rhs(batched: bool = False):
     """The jitted right-hand side at one instant (built once; the system is a pytree argument):
     ``[Phi_v; M^-1 (Q_q Phi_q + Q_qd Phi_v)] * T`` with ``Phi = [Phi_q; Phi_v]`` flattened. Only
     the Jacobians of the force enter (constant terms drop out of the tangents). One compiled call
-    per evaluation (the ODE solver calls it ~1000 times per monodromy)."""
-    global _VARIATIONAL_RHS
-    if _VARIATIONAL_RHS is None:
+    per evaluation (the ODE solver calls it ~1000 times per monodromy); `batched`: vmapped over
+    the members ``(q, q', p, M^-1, T, Phi)`` of a batch, the phase and the system shared."""
+    if batched not in _VARIATIONAL_RHS:
         import jax
         import jax.numpy as jnp
 
@@ -259,31 +259,33 @@ def _variational_rhs():
             velocity_rows = minv @ (dq @ phi[:n] + dqd @ phi[n:])
             return (period * jnp.concatenate([phi[n:], velocity_rows])).ravel()
 
-        _VARIATIONAL_RHS = jax.jit(rhs)
-    return _VARIATIONAL_RHS
+        _VARIATIONAL_RHS[batched] = jax.jit(jax.vmap(rhs, in_axes=(None, None, 0, 0, 0, 0, 0, 0)) if batched else rhs)
+    return _VARIATIONAL_RHS[batched]
 
 
-def state_synthesis(coefficients, harmonics: int, base_frequency: float):
+def state_synthesis(coefficients, harmonics: int, base_frequency):
     """``tau -> (q, q')`` at the base-period fraction ``tau`` (numpy) from real Fourier
-    coefficients ``(ndof, 2H+1)`` [``a_0, a_1, b_1, ...``]: one matrix product
+    coefficients ``(..., ndof, 2H+1)`` [``a_0, a_1, b_1, ...``] and base frequencies (scalar or
+    ``(...)``): arrays ``(..., ndof)``, from one matrix product
     ``[q; q'] = S [1, cos(2 pi k tau), sin(2 pi k tau)]``.
 
     In numpy, not in the compiled right-hand side: a reduction over the harmonics there makes
     XLA hand the program to its worker thread, which costs more than the whole evaluation."""
     c = np.asarray(coefficients, dtype=float)
-    n = c.shape[0]
+    n = c.shape[-2]
     k = np.arange(1, harmonics + 1)
-    a, b = c[:, 1::2], c[:, 2::2]
+    w = np.asarray(base_frequency, dtype=float)[..., None, None]
+    a, b = c[..., 1::2], c[..., 2::2]
     synthesis = np.concatenate([
-        np.concatenate([c[:, :1], a, b], axis=1),
-        np.concatenate([np.zeros((n, 1)), base_frequency * b * k, -base_frequency * a * k], axis=1),
-    ])
+        np.concatenate([c[..., :1], a, b], axis=-1),
+        np.concatenate([np.zeros(c.shape[:-1] + (1,)), w * b * k, -w * a * k], axis=-1),
+    ], axis=-2)
     orders = 2.0 * np.pi * k
 
     def state(tau):
         angle = orders * tau
         x = synthesis @ np.concatenate([[1.0], np.cos(angle), np.sin(angle)])
-        return x[:n], x[n:]
+        return x[..., :n], x[..., n:]
 
     return state
 
@@ -292,27 +294,43 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
     """Monodromy matrix over one base period ``nu 2 pi / w_exc(p)`` from the variational equations.
 
     **Arguments:** `system`: any :class:`~hbgear.engine.system.PeriodicSystem`; `p`: its
-    parameter; `state`: ``tau -> (q, q')`` along the periodic solution, ``tau`` the fraction of
-    the base period, arrays ``(ndof,)`` (:func:`state_synthesis` of a harmonic-balance solution);
-    `nu`: base period in excitation periods; `rtol`, `atol`: of DOP853 on ``Phi``.
+    parameter, or a 1-D array of parameters (a batch: one integration of all the members'
+    equations together, each evaluation of the right-hand side one vmapped call, so a batch
+    costs about one monodromy; members are padded to a power of two, so few batch sizes
+    compile); `state`: ``tau -> (q, q')`` along the periodic solution(s), ``tau`` the fraction
+    of the base period, arrays ``(ndof,)`` (``(len(p), ndof)`` for a batch; :func:`state_synthesis`
+    of harmonic-balance solutions); `nu`: base period in excitation periods; `rtol`, `atol`: of
+    DOP853 on ``Phi`` (of all members together, for a batch).
 
-    **Returns:** ``Phi``, shape ``(2n, 2n)``, ``x(T) = Phi x(0)``, ``x = (q, q')`` in SI.
+    **Returns:** ``Phi``, shape ``(2n, 2n)`` (``(len(p), 2n, 2n)``), ``x(T) = Phi x(0)``,
+    ``x = (q, q')`` in SI.
 
-    **Raises:** ``RuntimeError`` if the integrator fails on a segment.
+    **Raises:** ``RuntimeError`` if the integrator fails on a segment; ``ValueError`` for a batch
+    whose members have different breakpoints.
     """
     import jax
     from scipy.integrate import solve_ivp
 
+    batch = np.ndim(p) > 0
+    ps = np.atleast_1d(np.asarray(p, dtype=float))
+    members = len(ps)
     n = system.ndof
-    variational_rhs = _variational_rhs()
-    minv = np.linalg.inv(np.asarray(system.mass_matrix(p, np), dtype=float))
-    base_period = nu * 2.0 * np.pi / float(system.excitation_frequency(p))
-    bp = _segments(system, p)
+    bp = _segments(system, float(ps[0]))
+    if any(not np.array_equal(_segments(system, float(x)), bp) for x in ps[1:]):
+        raise ValueError("monodromy_variational: the members of a batch must have the same breakpoints")
     edges = np.unique(np.concatenate([(j + bp) / nu for j in range(nu)]))
+    size = 1 << (members - 1).bit_length() if batch else 1  # padded with copies of the last member
+    pad = np.minimum(np.arange(size), members - 1)
+    minv = np.stack([np.linalg.inv(np.asarray(system.mass_matrix(float(x), np), dtype=float)) for x in ps])[pad]
+    base_period = (nu * 2.0 * np.pi / np.array([float(system.excitation_frequency(float(x))) for x in ps]))[pad]
+    variational_rhs = _variational_rhs(batch)
     # the arguments that stay the same over the ~1000 calls go to the device once (a Python float
     # or numpy argument is converted at every call: most of the cost of a call before)
-    device_system, *constants = jax.device_put((system, float(p), minv, base_period))
-    phi = np.eye(2 * n)
+    if batch:
+        device_system, *constants = jax.device_put((system, ps[pad], minv, base_period))
+    else:
+        device_system, *constants = jax.device_put((system, float(ps[0]), minv[0], float(base_period[0])))
+    phi = np.broadcast_to(np.eye(2 * n), (size, 2 * n, 2 * n)) if batch else np.eye(2 * n)
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a < 1e-14:
             continue
@@ -323,10 +341,12 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
         def rhs(tau, y, lo=lo, hi=hi, start=a, s0=s_lo):
             s = float(np.clip(s0 + (tau - start) * nu, lo, hi))
             q, qd = state(tau)
-            return np.asarray(variational_rhs(device_system, s, q, qd, *constants, y))
+            if batch:
+                q, qd = q[pad], qd[pad]
+            return np.asarray(variational_rhs(device_system, s, q, qd, *constants, y.reshape(size, -1) if batch else y)).ravel()
 
-        sol = solve_ivp(rhs, (a, b), phi.ravel(), method="DOP853", rtol=rtol, atol=atol)
+        sol = solve_ivp(rhs, (a, b), np.ravel(phi), method="DOP853", rtol=rtol, atol=atol)
         if not sol.success:
             raise RuntimeError(f"variational equations failed on [{a:.6g}, {b:.6g}]: {sol.message}")
-        phi = sol.y[:, -1].reshape(2 * n, 2 * n)
-    return phi
+        phi = sol.y[:, -1].reshape(phi.shape)
+    return phi[:members] if batch else phi
