@@ -8,8 +8,9 @@ Load -> build -> :func:`hbgear.frequency_response` -> write, into the output dir
 - ``floquet.csv``: every Floquet multiplier of every ``nu = 1`` point (not with ``--no-stability``);
 - ``frc.json``: status and message, ``H`` and how it was chosen, folds, stability (method,
   unstable points, the exact scan's unstable zones), period doublings, continuation settings,
-  timings, the config;
-- ``frc.png``: the curve (:func:`hbgear.outputs.plots.frc_figure`).
+  timings (``outputs``: the two CSV files; ``total``: up to this file), the config;
+- ``frc.png``: the curve (:func:`hbgear.outputs.plots.frc_figure`), drawn last, once the numbers
+  are on disk (matplotlib is imported only then).
 
 If the continuation stops before the stop speed, the curve so far is written (with the status in
 ``frc.json``) and the run ends with exit status 1.
@@ -140,13 +141,13 @@ def run(config, args, out_dir) -> int:
     write_csv_atomic(out_dir / "frc.csv", COLUMNS, [[row[c] for c in COLUMNS] for row in curve.rows()])
     if curve.response.stability is not None:
         write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, curve.floquet_rows())
-    save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
-    t_out = time.perf_counter()
     method = sweep_method(rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop),
                           None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm))
+    t_out = time.perf_counter()
     timings = dict(curve.timings_s) | {"per_point_ms": 1e3 * curve.timings_s["continuation"] / max(curve.points - 1, 1),
-                                       "outputs": t_out - t_done, "total": time.perf_counter() - t0}
+                                       "outputs": t_out - t_done, "total": t_out - t0}
     write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings))
+    save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
     if not curve.success:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "

@@ -161,7 +161,7 @@ def exact_negative_multipliers(system, hb: HarmonicBalance, zs, ps) -> np.ndarra
     linear = system.linearization()
     rest = []
     for i, (z, p) in enumerate(zip(zs, ps)):
-        if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):
+        if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):  # (z unused if linear)
             out[i] = most_negative_real(multipliers_linear(linear, float(p)))
         else:
             rest.append(i)
@@ -262,7 +262,8 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
     Illinois regula falsi on ``mu + 1`` (:func:`exact_negative_multiplier`) in the parameter, to
     `tolerance` relative; `solve(p, z0) -> z` converges a ``nu = 1`` solution at `p` from `z0`
     (started from the straight line between the two points, so it stays on this branch even where
-    the curve is multivalued). Where the multiplier needs the variational equations (a batch of
+    the curve is multivalued; for a linear system, whose multipliers do not depend on the solution,
+    only at the crossing found). Where the multiplier needs the variational equations (a batch of
     them costs about one) the crossing of Hill's multipliers (cheap) is located first, to
     :data:`HILL_TOLERANCE`; the exact multipliers there (one batch for all segments) and Hill's
     slope predict each exact crossing, and the exact multipliers on either side of it,
@@ -349,9 +350,10 @@ def _locate_one(system, hb, solve_on_segment, segment, hill, exact_at_hill, tole
     """One segment's crossing by the exact multipliers: bracketed from Hill's crossing (`hill`,
     with its exact ``g`` if known) where there is one, else over the whole segment; then Illinois."""
     pa, _, pb, _ = segment
+    solution_free = system.linearization() is system  # the multipliers do not depend on the solution
 
     def g(w):
-        z = solve_on_segment(w)
+        z = None if solution_free else solve_on_segment(w)
         mu = exact_negative_multiplier(system, hb, z, w)
         return (mu + 1.0 if np.isfinite(mu) else 1.0), (z, mu)
 
@@ -371,6 +373,8 @@ def _locate_one(system, hb, solve_on_segment, segment, hill, exact_at_hill, tole
                           f"{da[1]:.6g}, {db[1]:.6g})")
         (w, (z, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
                                       tolerance, max_steps)
+        if z is None:
+            z = solve_on_segment(w)
     except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
         return None, f"locating the crossing failed: {type(exc).__name__}: {exc}"
     return PeriodDoublingPoint(float(w), z, float(mu), (float(pa), float(pb))), None

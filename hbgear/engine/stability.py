@@ -145,6 +145,15 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
     return BranchStability(out, max_abs, stable, method, warning)
 
 
+def _stable_rows(mult: np.ndarray) -> np.ndarray:
+    """:func:`~hbgear.engine.floquet.is_stable` of every row of `mult` ``(m, k)``, vectorised."""
+    if mult.shape[-1] == 0:
+        return np.zeros(len(mult), dtype=bool)
+    finite = np.all(np.isfinite(mult), axis=-1)
+    with np.errstate(invalid="ignore"):
+        return finite & (np.max(np.abs(mult), axis=-1) <= 1.0 + 1e-9)
+
+
 def leaves_through(multiplier) -> str:
     """``"-1"`` (period doubling), ``"+1"`` (divergence) or ``"complex"`` (a complex pair)."""
     if abs(multiplier.imag) > 1e-6 * abs(multiplier):
@@ -168,7 +177,7 @@ def unstable_zones(system, ps, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> li
     frac = np.arange(subdivisions) / subdivisions
     grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
     mult = np.concatenate([np.asarray(multipliers_linear(system, grid[lo:lo + 512])) for lo in range(0, len(grid), 512)])
-    unstable = np.array([not is_stable(m) for m in mult])
+    unstable = ~_stable_rows(mult)
     zones = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):
