@@ -169,7 +169,7 @@ def exact_negative_multipliers(system, hb: HarmonicBalance, zs, ps) -> np.ndarra
         coefficients = np.stack([hb.decode(system, zs[i])[0] for i in rest])
         base = np.array([float(hb.base_frequency(system, ps[i])) for i in rest])
         state = state_synthesis(coefficients, hb.harmonics, base)
-        phi = monodromy_variational(system, ps[rest], state, 1, rtol=VARIATIONAL_RTOL / math.sqrt(len(rest)))
+        phi = monodromy_variational(system, ps[rest], state, 1, rtol=VARIATIONAL_RTOL)
         out[rest] = [most_negative_real(m) for m in np.linalg.eigvals(phi)]
     return out
 
@@ -183,8 +183,7 @@ def exact_negative_multiplier(system, hb: HarmonicBalance, z, p) -> float:
     return float(exact_negative_multipliers(system, hb, [np.asarray(z)], [p])[0])
 
 
-#: ``rtol`` of the variational monodromy (DOP853) of the exact multipliers; a batch of ``K``
-#: members integrates with ``rtol / sqrt(K)`` (its error norm is the RMS over all members).
+#: ``rtol`` of the variational monodromy (DOP853) of the exact multipliers (per member of a batch).
 VARIATIONAL_RTOL = 1e-10
 
 #: Smallest first step (relative) from Hill's crossing towards the exact one (:func:`_exact_bracket`).
