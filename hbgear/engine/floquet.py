@@ -163,13 +163,21 @@ def hill_exponents_along(hb, zs, ps, system, follower=None, **kwargs):
     refinement seeded from the point before (:class:`hbgear.engine.hill.CentralFollower`: the
     same exponents as the unseeded way, which settles the points where the seeded way is not
     confident). `follower` (:func:`hill_follower`) carries the chain from one call to the next,
-    so a branch can be passed in pieces; keywords as :func:`hill_follower` otherwise.
+    so a branch can be passed in pieces; keywords as :func:`hill_follower` otherwise. Problems
+    of at most :data:`~hbgear.engine.hill.FOLLOW_MIN_SIZE` unknowns go to
+    :func:`hill_exponents_batch` (the point-by-point Python loop costs more there than the
+    stacked seeds and refinements of all points at once).
     """
-    from .hill import hill_pencils
+    from .hill import FOLLOW_MIN_SIZE, hill_pencils
 
     ps = np.atleast_1d(np.asarray(ps, dtype=float))
     if ps.size == 0:
         return []
+    if hb.size <= FOLLOW_MIN_SIZE:  # small problems: the batched unseeded way is cheaper
+        kwargs.pop("predict", None)
+        if follower is not None:
+            kwargs.update(drop_trivial=follower.zero_tol is not None, copy_tol=follower.copy_tol)
+        return hill_exponents_batch(hb, zs, ps, system, **kwargs)
     follower = hill_follower(hb, system, **kwargs) if follower is None else follower
     zs = np.atleast_2d(np.asarray(zs, dtype=float))
     out = []

@@ -641,6 +641,8 @@ def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, c
         for k, mu in zip(rest, dense_central(a0[rest], a1[rest], a2[rest], ndof, harmonics,
                                              zero_tol=zero_tol, copy_tol=copy_tol)):
             out[k] = mu
+    if len({len(mu) for mu in out}) == 1:  # one vectorised snap for the whole stack
+        return list(_snapped(np.stack(out)))
     return [_snapped(mu) for mu in out]
 
 
@@ -673,6 +675,11 @@ FOLLOW_REUSE_RHO = 0.05
 
 #: Most chord steps of one correction (a slower one is restarted once from a fresh factorisation).
 FOLLOW_MAX_STEPS = 8
+
+#: Problems of at most this many unknowns ``N`` are not followed point by point (see
+#: :func:`hbgear.engine.floquet.hill_exponents_along`): on the Duffing curve (N = 15, 167
+#: points) the follower took 0.37-0.86 ms a point, the batched unseeded way 0.10-0.23 ms.
+FOLLOW_MIN_SIZE = REFINE_MIN_SIZE
 
 _LAPACK: dict = {}
 
