@@ -180,9 +180,10 @@ def hill_exponents_along(hb, zs, ps, system, follower=None, **kwargs):
         return hill_exponents_batch(hb, zs, ps, system, **kwargs)
     follower = hill_follower(hb, system, **kwargs) if follower is None else follower
     zs = np.atleast_2d(np.asarray(zs, dtype=float))
+    prepared = hb.prepare(system)
     out = []
     for lo in range(0, len(ps), 32):  # the pencils of 32 points at a time (13 MB at N = 130)
-        parts, w = hill_pencils(hb, zs[lo:lo + 32], ps[lo:lo + 32], system)
+        parts, w = hill_pencils(hb, zs[lo:lo + 32], ps[lo:lo + 32], system, prepared)
         pencils = (abc for part in parts for abc in part)
         out += [_exponents_and_multipliers(follower(abc), wk) for abc, wk in zip(pencils, w)]
     return out

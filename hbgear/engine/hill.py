@@ -128,12 +128,12 @@ def _pencil_function(hb, batched: bool):
     return _PENCIL_FUNCTIONS[key]
 
 
-def hill_pencils(hb, zs, ps, system):
+def hill_pencils(hb, zs, ps, system, prepared=None):
     """The stacked Hill matrices ``(A0, A1, A2)`` of ``P(mu)`` at the points ``(zs[i], ps[i])``.
 
     One jitted call per chunk of :func:`_pencil_chunk` points, vmapped (the last chunk padded,
     so one compilation serves every curve length; a single point is one unbatched call), the
-    discretisation prepared once.
+    discretisation prepared once (or given: `prepared`, :meth:`~hbgear.engine.hb.HarmonicBalance.prepare`).
 
     **Returns:** ``(pencils, w)``: a list of read-only arrays ``(k, 3, N, N)`` (``A0 = J``,
     ``A1 = w D1``, ``A2 = w^2 D2``, scaled), ``k`` points each, in order, and ``(m,)`` the base
@@ -145,7 +145,7 @@ def hill_pencils(hb, zs, ps, system):
     ps = np.atleast_1d(np.asarray(ps, dtype=float))
     m = len(ps)
     w = np.array([float(hb.base_frequency(system, p)) for p in ps])
-    prepared = hb.prepare(system)
+    prepared = hb.prepare(system) if prepared is None else prepared
     if m == 1:
         return [np.asarray(_pencil_function(hb, False)(jnp.asarray(zs[0]), ps[0], system, prepared))[None]], w
     fn, chunk = _pencil_function(hb, True), _pencil_chunk(hb.size)

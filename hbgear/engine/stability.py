@@ -27,7 +27,7 @@ __all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_thro
 
 #: Points per call of :func:`~hbgear.engine.floquet.hill_exponents_along` (the progress bar
 #: steps by this; a batch that fails is redone point by point).
-HILL_BATCH = 32
+HILL_BATCH = 128
 
 #: Sub-intervals per branch step of the exact scan for unstable zones (:func:`unstable_zones`).
 ZONE_SCAN_SUBDIVISIONS = 6
