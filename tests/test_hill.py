@@ -287,6 +287,25 @@ def test_seeded_along_a_branch_equals_the_dense_and_the_unseeded_way(rpm_from, r
         assert negative == [int(np.sum((np.abs(m.imag) < 1e-12) & (m.real < 0))) for _, m in dense]
 
 
+def test_along_a_branch_with_a_free_mean_coordinate_keeps_the_unseeded_selection():
+    """Reaction boundary (H = 24): the split Jordan pair at 0 lies within the trivial tolerance
+    at some points and not at others (13259 rpm: one half at -4.8e-5); every point must keep
+    as many exponents as the dense selection, with its values."""
+    from hbgear.engine.response import frequency_response
+    from hbgear.gear.solve import start_guess
+
+    model = gear("friction.model='NLTV'", "friction.law='arctan'", "boundary.output='reaction'")
+    hb, system = HarmonicBalance(model.ndof, 24, 1, 256), GearSystem(model)
+    curve = frequency_response(system, (rpm_to_rad_s(13240.0), rpm_to_rad_s(13330.0)), harmonics=24, samples=256,
+                               z0=start_guess(model, hb, system), stability=False, period_doubling=False)
+    zs, ps = curve.branch.z, curve.branch.p
+    along = floquet.hill_exponents_along(hb, zs, ps, system)
+    dense = floquet.hill_exponents_batch(hb, zs, ps, system, method="dense")
+    assert len({len(m) for _, m in dense}) == 2  # the number of trivial exponents dropped changes
+    for (_, mult), (_, mult_d) in zip(along, dense):
+        assert max_pair_distance(mult, mult_d) < 1e-8
+
+
 def test_follower_starts_unseeded_and_after_a_reset():
     hb, system, zs, ps = nltv_branch(5230.0, 5300.0)
     pencils = np.concatenate(hill.hill_pencils(hb, zs[:6], ps[:6], system)[0])
