@@ -341,12 +341,16 @@ def unstable_zones(model: GearPairModel, omegas, subdivisions: int = 6) -> list[
     return [_zone_in_rpm(z) for z in scan(GearSystem(model), omegas, subdivisions)]
 
 
+#: The read-outs among the ``frc.csv`` columns (only these are evaluated for a curve).
+_READ_OUT_COLUMNS = ("dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor")
+
+
 def _table(model, p, zs, hb, max_abs, stable, nu, residual, speed_rpm=None) -> dict:
-    """The frc.csv columns of a set of points (read-outs batched)."""
-    read = read_outs(model, p, zs, hb)
+    """The frc.csv columns of a set of points (read-outs batched, only those of the columns)."""
+    read = read_outs(model, p, zs, hb, keys=_READ_OUT_COLUMNS)
     speed = rad_s_to_rpm(np.asarray(p, dtype=float)) if speed_rpm is None else speed_rpm
     return {"speed_rpm": np.asarray(speed, dtype=float), "mesh_freq_hz": np.asarray(p) * model.teeth_pinion / (2 * math.pi),
-            **{k: read[k] for k in ("dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor")},
+            **read,
             "max_abs_floquet": np.asarray(max_abs, dtype=float), "stable": np.asarray(stable, dtype=float),
             "nu": np.full(len(p), nu, dtype=float), "residual": np.asarray(residual, dtype=float)}
 

@@ -111,20 +111,23 @@ def _decode(model: GearPairModel, z, hb: HarmonicBalance):
 _synthesize = synthesize
 
 
-def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=SUMMARY_KEYS) -> dict:
     """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
-    [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
+    [m], `omegas`, `u_static`, `reaction` ``(P,)``; `keys` as there. **Returns:** arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]
     _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
     q, qd = _node_states(coefficients, base_frequency, basis, nu)
     out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
-                           np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
-    # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
-    dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
-    out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
-    out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
+                           np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None],
+                           keys=keys)
+    if "dte_p2p_um" in out:  # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
+        dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
+        out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    if "mean_mesh_power_W" in out:
+        out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients,
+                                                                             harmonics, nu)
     return out
 
 
@@ -163,16 +166,17 @@ def _node_states(coefficients, base_frequency, basis, nu: int):
 READ_OUT_BATCH = 512
 
 
-def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
+def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=SUMMARY_KEYS) -> dict:
     """``PeriodicSolution.from_z(model, w, z, hb).summary()`` for every point ``(omegas[i],
-    zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary."""
+    zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary
+    (`keys`: only those, see :func:`~hbgear.gear.readouts.periodic_summary`)."""
     omegas = np.asarray(omegas, dtype=float)
     coefficients, reaction = _decode(model, zs, hb)
     u_static = np.broadcast_to(np.asarray(model.static_windup(omegas), dtype=float), omegas.shape)
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
-                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
+                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], keys)
              for k in range(0, len(omegas), READ_OUT_BATCH)]
-    return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
+    return {key: np.concatenate([part[key] for part in parts]) for key in keys}
 
 
 #: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by
