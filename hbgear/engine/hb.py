@@ -16,7 +16,8 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 - ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
   with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
   of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._sample_points`):
-  ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump.
+  ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump; likewise the jumps at the
+  zeros of a system's ``event_functions``, located along the solution (:mod:`hbgear.engine.events`).
 - A ``free_mean_dof`` has its mean pinned to zero; its slot in ``X`` holds the constant force
   unknown (e.g. the reaction output torque) instead.
 
@@ -36,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import fourier
+from . import events, fourier
 from .quadrature import mesh_period_rule
 
 jax.config.update("jax_enable_x64", True)
@@ -360,7 +361,17 @@ class HarmonicBalance:
         s, q, qd, (_, _, weight, delta) = self._sample_points(x, velocity, system, p, layout)
         values = system.force(s, q, qd, p, "nonlinear", extra, jnp)
         N = self.samples
-        return (fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta).reshape(self.size)
+        projected = fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta
+        if events.declared(system, p):
+            projected = projected + self._event_correction(x, velocity, extra, p, system)
+        return projected.reshape(self.size)
+
+    def _event_correction(self, x, velocity, extra, p, system):
+        """The jumps of ``Q_nl`` at the zeros of the system's event functions
+        (:func:`hbgear.engine.events.jump_correction`), shape ``(ndof, 2H+1)``."""
+        n = self.ndof
+        return events.jump_correction(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
+                                      self.harmonics, self.nu, self.samples)
 
     def _sample_points(self, x, velocity, system, p, layout=None):
         r"""Where ``Q_nl`` is evaluated: the ``N`` uniform samples of the base period, then each
@@ -476,7 +487,8 @@ class HarmonicBalance:
         ``ndof`` when the system declares ``nonlinear_force_uses_displacement = False``
         (``T_q = 0``, e.g. friction that depends on the velocities only). The jump terms of
         :meth:`_sample_points` add ``delta_c^T dJ_c/dx(t_c) at_c`` from the same pointwise
-        derivatives at the jump phases.
+        derivatives at the jump phases; the jumps at state-dependent zeros of event functions
+        (:meth:`_event_correction`) add :func:`hbgear.engine.events.jump_jacobian`.
         """
         n, H, N = self.ndof, self.harmonics, self.samples
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
@@ -500,7 +512,12 @@ class HarmonicBalance:
         jumps = _jumps(derivatives[..., N:], weight)  # (1|2, n, n, C)
         blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, jumps, at_c)
         t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
-        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
+        t_v = self._flatten(blocks[-1])
+        if events.declared(system, p):  # the jumps at the event zeros move with the state
+            e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
+                                            self.harmonics, self.nu, self.samples)
+            t_q, t_v = t_q + self._flatten(e_q), t_v + self._flatten(e_v)
+        return t_q, t_v, jnp.kron(jnp.eye(n), d)
 
     def _times_derivative(self, a, system, p):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times

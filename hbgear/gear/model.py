@@ -304,6 +304,21 @@ class GearPairModel:
         b = 0.5 * self.backlash_m
         return xp.where(x > b, 1.0, 0.0), xp.where(x < -b, 1.0, 0.0)
 
+    def contact_events(self, s, q, omega_pinion, xp=np):
+        """``(x - b, x + b)`` [m], shape ``(2,) + q[0].shape``, where the contact gate of the friction
+        loads jumps (backlash with friction and ``normal_loads = "compressive"``), else ``None``.
+
+        Formulation A's load ``sigma_j N`` switches on and off at ``x = b``; formulation B's
+        ``sigma_j max(+-F_mesh, 0)`` jumps where a flank closes with ``F_mesh = c x' != 0``.
+        """
+        if self.contact != "backlash" or self.normal_loads != "compressive" or self.friction.name == "none":
+            return None
+        _, _, wm = self.speeds(omega_pinion)
+        eps, _ = self.static_transmission_error(s, wm, xp)
+        x = q[0] - eps
+        b = 0.5 * self.backlash_m
+        return xp.stack([x - b, x + b])
+
     def friction_loads(self, s, q, qd, omega_pinion, sigma, xp=np):
         """Normal loads ``N_j >= 0`` of the pairs [N] and their part in the linear split.
 

@@ -84,7 +84,7 @@ class PeriodicSolution:
     def summary(self) -> dict:
         """The INTERFACE read-outs (µm, W) from exact quadrature over the period."""
         out = _summaries(self.model, np.array([self.omega_pinion]), self.coefficients[None], self.harmonics, self.nu,
-                         np.array([self.u_static_m]), np.array([self.reaction_force_N]))
+                         np.array([self.u_static_m]), np.array([self.reaction_force_N]), self.samples)
         return {k: float(v[0]) for k, v in out.items()}
 
     @classmethod
@@ -142,10 +142,12 @@ def _synthesize(coefficients, base_frequency, cos, sin):
     return q.reshape(c.shape[:-1] + (-1,)), base_frequency * qd.reshape(c.shape[:-1] + (-1,))
 
 
-def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, samples=None) -> dict:
     """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
-    [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
+    [m], `omegas`, `u_static`, `reaction` ``(P,)``; `samples`: the solutions' AFT samples (where
+    the friction loads jump at contact events, :func:`_event_split_summaries`). **Returns:**
+    arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]
     _, s, w, cos, sin = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
@@ -154,8 +156,39 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -
                            np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
     dense = _synthesize(coefficients[:, :1], 0.0, *_dense_basis(harmonics))[0][:, 0]
     out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    if model.contact_events(np.zeros(1), np.zeros((model.ndof, 1)), 0.0) is not None:
+        split = _event_split_summaries(model, omega[:, 0], coefficients, harmonics, nu, u_static, reaction, samples)
+        out.update({key: split[key] for key in SUMMARY_KEYS if key not in ("dte_p2p_um", "dynamic_factor")})
+        out["dynamic_factor"] = np.maximum(out["dynamic_factor"], split["dynamic_factor"])
     out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
     return out
+
+
+def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, samples=None) -> dict:
+    """The summaries point by point with the quadrature also split at the contact events.
+
+    Where the friction loads jump at a flank's contact (:meth:`GearPairModel.contact_events`) the
+    instants move with the solution: they are located as the harmonic balance does
+    (:func:`hbgear.engine.events.crossings`) and added to the breakpoints of a base-period rule,
+    so the read-outs integrate smooth pieces only. **Returns:** arrays ``(P,)``.
+    """
+    from ..engine.events import crossings_compiled
+
+    system = GearSystem(model)
+    samples = samples or max(1024, 4 * harmonics * nu + 2)
+    phases = np.asarray(model.phase_breakpoints(), dtype=float)
+    fixed = np.concatenate([(phases + j) / nu for j in range(nu)])
+    rows = []
+    for omega, xc, u_s, r in zip(omegas, np.asarray(coefficients, dtype=float), u_static, reaction):
+        base_frequency = float(model.speeds(float(omega))[2]) / nu
+        vc = xc @ fourier.derivative_matrix(harmonics, base_frequency).T
+        t, valid = (np.asarray(a) for a in crossings_compiled(system, float(omega), jnp.asarray(xc), jnp.asarray(vc),
+                                                               nu, samples))
+        base, w = mesh_period_rule(np.concatenate([fixed, t[valid]]), 2 * harmonics + 8)
+        tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+        q, qd = _synthesize(xc, base_frequency, np.cos(tau), np.sin(tau))
+        rows.append(periodic_summary(model, float(omega), (base * nu) % 1.0, q, qd, w, float(u_s), float(r)))
+    return {key: np.array([float(row[key]) for row in rows]) for key in SUMMARY_KEYS}
 
 
 def _impulse_power(model, omegas, coefficients, harmonics, nu):
@@ -186,7 +219,7 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
     coefficients, reaction = _decode(model, zs, hb)
     u_static = np.broadcast_to(np.asarray(model.static_windup(omegas), dtype=float), omegas.shape)
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
-                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
+                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], hb.samples)
              for k in range(0, len(omegas), READ_OUT_BATCH)]
     return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
 

@@ -118,6 +118,11 @@ class GearSystem(PeriodicSystem):
         model, _ = self._at(p)
         return model.lti_step_forcing(s, xp)
 
+    def event_functions(self, s, q, qd, p, xp=np):
+        """Backlash with friction: the flank contacts ``x -+ b`` (:meth:`GearPairModel.contact_events`)."""
+        model, omega = self._at(p)
+        return model.contact_events(s, q, omega, xp)
+
     def force(self, s, q, qd, p, part, extra, xp=np):
         model, omega = self._at(p)
         # the spring's static wind-up enters the constant terms only (not the "nonlinear" part),
