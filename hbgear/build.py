@@ -72,6 +72,8 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
     if coupling == "LTI" and contact == "backlash":
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
+    if coupling != "LTI" and fr.lti_friction != "excitation":
+        raise ConfigError("friction.lti_friction", fr.lti_friction, "'excitation' unless friction.model is 'LTI'")
     if coupling == "NLTV" and boundary == "torques":
         raise ConfigError(
             "boundary.output",
@@ -106,4 +108,5 @@ def build_model(cfg, contact_ratio: float | None = None) -> GearPairModel:
         boundary=boundary,
         damping_model=mesh.damping_model,
         contact=contact,
+        lti_friction=fr.lti_friction,
     )
