@@ -277,3 +277,24 @@ def test_lti_friction_is_checked():
         model_with("friction.model=LTV", "friction.lti_friction=damping")
     with pytest.raises(ValueError, match="lti_friction"):
         model_with("friction.model=LTV").replace(lti_friction="both")
+
+
+def test_no_damper_on_the_dte_velocity_can_dissipate_the_friction_loss():
+    """Why ``c_f`` is not solved self-consistently from ``c_f <delta'^2> = P_f``: for the reference
+    pair at 3000 rpm (LTI, torques, zeta 0.01) a damper ``c_f`` added to ``delta'`` dissipates at
+    most ~18 W over all ``c_f`` (closed form, 4000 harmonics), against a nominal friction loss of
+    ~957 W."""
+    model = model_with("friction.model=LTI", "friction.law=none", "mesh.damping_ratio=0.01", "boundary.output=torques")
+    omega = rpm_to_rad_s(3000.0)
+    orders = np.arange(1, 4001, dtype=float)
+    forcing = lti_closed_form(model, omega, orders) * (
+        model.k_mean_N_per_m - model.mass_equivalent_kg * (orders * 25 * omega) ** 2
+        + 1j * model.mesh_damping_Ns_per_m * orders * 25 * omega)  # (k_mean + i c n w) d_n
+    n_w = orders * 25 * omega
+    best = 0.0
+    for c_f in np.geomspace(1e-2, 1e7, 300):
+        x = forcing / (model.k_mean_N_per_m - model.mass_equivalent_kg * n_w**2
+                       + 1j * (model.mesh_damping_Ns_per_m + c_f) * n_w)
+        best = max(best, c_f * np.sum(2 * np.abs(n_w * x) ** 2))
+    loss, _ = coulomb_means_closed_form(model_with("friction.model=LTI"), omega)
+    assert best < 25.0 and loss > 900.0
