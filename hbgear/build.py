@@ -156,6 +156,8 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
     if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
+    if coupling != "LTI" and fr.lti_friction != "excitation":
+        raise ConfigError("friction.lti_friction", fr.lti_friction, "'excitation' unless friction.model is 'LTI'")
     if coupling == "NLTV" and boundary == "torques":
         raise ConfigError(
             "boundary.output",
@@ -207,6 +209,7 @@ def build_model(cfg, contact_ratio: float | None = None):
         boundary=boundary,
         damping_model=mesh.damping_model,
         contact=contact,
+        lti_friction=fr.lti_friction,
     )
 
 

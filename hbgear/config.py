@@ -59,6 +59,7 @@ MAX_COUNT = 10_000_000  # cap on point / cycle / iteration counts (guards agains
 FRICTION_LAWS = ("none", "coulomb", "arctan", "kelley-lemanski")
 FRICTION_FORMULATIONS = ("A", "B")
 FRICTION_MODELS = ("LTI", "LTV", "NLTV")
+LTI_FRICTION = ("excitation", "damping", "both")
 DAMPING_MODELS = ("constant", "proportional")
 BOUNDARY_OUTPUTS = ("torques", "spring", "reaction")
 STIFFNESS_MODELS = ("rectangular", "pair_table", "iso6336", "potential_energy")
@@ -271,7 +272,9 @@ class FrictionConfig:
     (kelley-lemanski only; roughness kept in micrometres as the law's constants use it);
     `regularization_m_per_s` [m/s]: with model NLTV, a discontinuous law (coulomb,
     kelley-lemanski) has ``sgn(Vs)`` replaced by ``(2/pi) atan(Vs / v_reg)`` -- the same in
-    harmonic balance and time integration (results converge as it shrinks).
+    harmonic balance and time integration (results converge as it shrinks); `lti_friction`
+    (model LTI only): "excitation" (nominal friction torques as a Fourier excitation, Eq. 10),
+    "damping" (an energy-equivalent viscous damper at the mesh instead) or "both".
     """
 
     law: str = "coulomb"
@@ -282,6 +285,7 @@ class FrictionConfig:
     viscosity_Pa_s: float = 0.01
     roughness_um: float = 0.5
     regularization_m_per_s: float = 0.005
+    lti_friction: str = "excitation"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -888,6 +892,7 @@ _friction = _section("friction", FrictionConfig, {
     "viscosity_Pa_s": _Key("viscosity_Pa_s", _POSITIVE),
     "roughness_um": _Key("roughness_um", _num(0.0, lo_open=False)),
     "regularization_m_per_s": _Key("regularization_m_per_s", _POSITIVE),
+    "lti_friction": _Key("lti_friction", _one_of(LTI_FRICTION)),
 })
 _boundary = _section("boundary", BoundaryConfig, {
     "output": _Key("output", _one_of(BOUNDARY_OUTPUTS)),

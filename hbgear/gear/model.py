@@ -49,6 +49,7 @@ PAIR_SLOTS = 2
 COUPLINGS = ("LTI", "LTV", "NLTV")
 FORMULATIONS = ("A", "B")
 BOUNDARIES = ("torques", "spring", "reaction")
+LTI_FRICTION = ("excitation", "damping", "both")
 
 
 @register_dataclass
@@ -82,7 +83,10 @@ class GearPairModel:
       `normal_loads`: ``"compressive"`` (MODEL.md section 11, :meth:`friction_loads`) or
       ``"signed"`` (``sigma_j N`` / ``sigma_j F_mesh`` whatever the contact: not a physical model,
       the linearisation along solutions with drive-flank contact and ``F_mesh > 0``; see
-      :func:`hbgear.gear.system.linear_equivalent`).
+      :func:`hbgear.gear.system.linear_equivalent`);
+      `lti_friction` (LTI only): the friction as the Fourier excitation of the nominal friction
+      torques (``"excitation"``, Eq. 10), as the energy-equivalent viscous damper at the mesh
+      (``"damping"``, :meth:`lti_friction_damping_Ns_per_m`) or both (``"both"``).
     """
 
     teeth_pinion: float
@@ -112,6 +116,7 @@ class GearPairModel:
     damping_model: str = field(default="constant", metadata=dict(static=True))
     contact: str = field(default="linear", metadata=dict(static=True))
     normal_loads: str = field(default="compressive", metadata=dict(static=True))
+    lti_friction: str = field(default="excitation", metadata=dict(static=True))
 
     def __post_init__(self):
         # pytree unflattening may pass placeholders; only check real strings
@@ -122,6 +127,7 @@ class GearPairModel:
             ("damping_model", ("constant", "proportional")),
             ("contact", ("linear", "backlash")),
             ("normal_loads", ("compressive", "signed")),
+            ("lti_friction", LTI_FRICTION),
         ):
             value = getattr(self, name)
             if isinstance(value, str) and value not in allowed:
@@ -132,6 +138,8 @@ class GearPairModel:
                 raise ValueError("formulation 'B' (dynamic normal loads) needs coupling 'LTV' or 'NLTV', not 'LTI'")
             if isinstance(self.contact, str) and self.contact == "backlash":
                 raise ValueError("contact 'backlash' needs coupling 'LTV' or 'NLTV', not 'LTI' (LTI is linear)")
+        elif isinstance(self.coupling, str) and isinstance(self.lti_friction, str) and self.lti_friction != "excitation":
+            raise ValueError(f"lti_friction {self.lti_friction!r} needs coupling 'LTI', not {self.coupling!r}")
 
     def replace(self, **changes) -> GearPairModel:
         return replace(self, **changes)
@@ -307,6 +315,21 @@ class GearPairModel:
         b = 0.5 * self.backlash_m
         return xp.where(x > b, 1.0, 0.0), xp.where(x < -b, 1.0, 0.0)
 
+    def contact_events(self, s, q, omega_pinion, xp=np):
+        """``(x - b, x + b)`` [m], shape ``(2,) + q[0].shape``, where the contact gate of the friction
+        loads jumps (backlash with friction and ``normal_loads = "compressive"``), else ``None``.
+
+        Formulation A's load ``sigma_j N`` switches on and off at ``x = b``; formulation B's
+        ``sigma_j max(+-F_mesh, 0)`` jumps where a flank closes with ``F_mesh = c x' != 0``.
+        """
+        if self.contact != "backlash" or self.normal_loads != "compressive" or self.friction.name == "none":
+            return None
+        _, _, wm = self.speeds(omega_pinion)
+        eps, _ = self.static_transmission_error(s, wm, xp)
+        x = q[0] - eps
+        b = 0.5 * self.backlash_m
+        return xp.stack([x - b, x + b])
+
     def friction_loads(self, s, q, qd, omega_pinion, sigma, xp=np):
         """Normal loads ``N_j >= 0`` of the pairs [N] and their part in the linear split.
 
@@ -381,14 +404,45 @@ class GearPairModel:
         """``(T_fp, T_fg)`` [N m]: ``-sum mu_j N_j xi_p,j`` and ``+sum mu_j N_j xi_g,j``.
 
         `part`: ``"all"``; ``"linear"`` (the loads' affine part of :meth:`friction_loads`) or
-        ``"nonlinear"`` (the rest), the split of :meth:`generalized_force`.
+        ``"nonlinear"`` (the rest), the split of :meth:`generalized_force`. LTI with
+        ``lti_friction`` ``"damping"`` / ``"both"``: the viscous damper ``c_f delta'`` at the mesh
+        (its torques ``-R_bp c_f delta'``, ``+R_bg c_f delta'``) replaces / joins the excitation.
         """
         pf, affine = self._pair_friction(s, q, qd, omega_pinion, xp)
         if part == "all":
             friction = pf["friction"]
         else:
             friction = pf["mu"] * (affine if part == "linear" else pf["normal"] - affine)
-        return -xp.sum(friction * pf["xi_p"], axis=0), xp.sum(friction * pf["xi_g"], axis=0)
+        t_fp, t_fg = -xp.sum(friction * pf["xi_p"], axis=0), xp.sum(friction * pf["xi_g"], axis=0)
+        if self.coupling != "LTI" or self.lti_friction == "excitation":
+            return t_fp, t_fg
+        if self.lti_friction == "damping":
+            t_fp, t_fg = 0.0 * t_fp, 0.0 * t_fg
+        damper = self.lti_friction_damping_Ns_per_m(omega_pinion, xp) * qd[0]
+        return t_fp - self.base_radius_pinion_m * damper, t_fg + self.base_radius_gear_m * damper
+
+    def lti_friction_damping_Ns_per_m(self, omega_pinion, xp=np):
+        r"""Energy-equivalent viscous damping of the friction loss, ``c_f`` [N s/m] (LTI).
+
+        ``c_f = <sum_j |mu_j| sigma_j N |V_s,j|> / <sum_j sigma_j V_s,j^2>``: the mean friction loss
+        of the nominal kinematics with quasi-static loads (paper p. 386, "for one meshing cycle, the
+        energy loss is int sum mu_i N_i xi_i d theta_i") over the mean square of the nominal sliding
+        velocities, the reference velocity; a damper ``c_f v`` sliding at those velocities
+        dissipates that loss (equal energy per cycle, the classical equivalent viscous damping).
+        It acts at the mesh on ``delta'``. Means over the mesh period by the quadrature between the
+        breakpoints (exact for the Coulomb law's pieces). Zero unless LTI with damping.
+        """
+        if self.coupling != "LTI" or self.lti_friction == "excitation":
+            return 0.0 * omega_pinion
+        from ..engine.quadrature import mesh_period_rule
+
+        s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
+        xi_p, xi_g, _, sigma = self.pair_positions(s, xp)
+        wp, wg, _ = self.speeds(omega_pinion)
+        vs, vr = xi_p * wp - xi_g * wg, xi_p * wp + xi_g * wg
+        mu = self.friction.mu(vs, vr, sigma * self.normal_load_N / self.face_width_m, xp)
+        loss = xp.sum(w * xp.sum(xp.abs(mu) * sigma * self.normal_load_N * xp.abs(vs), axis=0))
+        return loss / xp.sum(w * xp.sum(sigma * vs * vs, axis=0))
 
     # -- the split into linear-periodic and nonlinear parts -------------------------------------
     @property
@@ -557,7 +611,7 @@ class GearPairModel:
         name = self.friction.name
         if name not in ("arctan", "coulomb", "none"):
             return None
-        if name == "none":
+        if name == "none" or (self.coupling == "LTI" and self.lti_friction == "damping"):
             return 0.0 * omega_pinion
         wp, wg, _ = self.speeds(omega_pinion)
         # the three pieces on the last axis, (slot, from, to, load share): two pairs until

@@ -24,7 +24,7 @@ from ..engine.response import PeriodicSolution as EnginePeriodicSolution
 from ..engine.response import newton_solve, synthesize
 from .readouts import SUMMARY_KEYS, periodic_summary
 from .model import GearPairModel
-from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
+from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis, mesh_period_rule
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -80,7 +80,7 @@ class PeriodicSolution(EnginePeriodicSolution):
         """The INTERFACE read-outs (µm, W) from exact quadrature over the period; with the Floquet
         multipliers, also ``max_abs_floquet``."""
         out = _summaries(self.model, np.array([self.omega_pinion]), self.coefficients[None], self.harmonics, self.nu,
-                         np.array([self.u_static_m]), np.array([self.reaction_force_N]))
+                         np.array([self.u_static_m]), np.array([self.reaction_force_N]), samples=self.samples)
         out = {k: float(v[0]) for k, v in out.items()}
         if self.multipliers is not None:
             m = np.asarray(self.multipliers)
@@ -111,10 +111,13 @@ def _decode(model: GearPairModel, z, hb: HarmonicBalance):
 _synthesize = synthesize
 
 
-def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=SUMMARY_KEYS) -> dict:
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=SUMMARY_KEYS,
+               samples=None) -> dict:
     """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
-    [m], `omegas`, `u_static`, `reaction` ``(P,)``; `keys` as there. **Returns:** arrays ``(P,)``."""
+    [m], `omegas`, `u_static`, `reaction` ``(P,)``; `keys` as there; `samples`: the solutions'
+    AFT samples (where the friction loads jump at contact events, :func:`_event_split_summaries`).
+    **Returns:** arrays ``(P,)``."""
     omega = np.asarray(omegas, dtype=float)[:, None]
     _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
@@ -125,10 +128,45 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, k
     if "dte_p2p_um" in out:  # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
         dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
         out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    if model.contact_events(np.zeros(1), np.zeros((model.ndof, 1)), 0.0) is not None:
+        split = _event_split_summaries(model, omega[:, 0], coefficients, harmonics, nu, u_static, reaction, samples,
+                                       keys)
+        out.update({key: split[key] for key in keys if key not in ("dte_p2p_um", "dynamic_factor")})
+        if "dynamic_factor" in keys:
+            out["dynamic_factor"] = np.maximum(out["dynamic_factor"], split["dynamic_factor"])
     if "mean_mesh_power_W" in out:
         out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients,
                                                                              harmonics, nu)
     return out
+
+
+def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, samples=None,
+                           keys=SUMMARY_KEYS) -> dict:
+    """The summaries point by point with the quadrature also split at the contact events.
+
+    Where the friction loads jump at a flank's contact (:meth:`GearPairModel.contact_events`) the
+    instants move with the solution: they are located as the harmonic balance does
+    (:func:`hbgear.engine.events.crossings`) and added to the breakpoints of a base-period rule,
+    so the read-outs integrate smooth pieces only. **Returns:** arrays ``(P,)``.
+    """
+    from ..engine.events import crossings_compiled
+
+    system = GearSystem(model)
+    samples = samples or max(1024, 4 * harmonics * nu + 2)
+    phases = np.asarray(model.phase_breakpoints(), dtype=float)
+    fixed = np.concatenate([(phases + j) / nu for j in range(nu)])
+    rows = []
+    for omega, xc, u_s, r in zip(omegas, np.asarray(coefficients, dtype=float), u_static, reaction):
+        base_frequency = float(model.speeds(float(omega))[2]) / nu
+        vc = xc @ fourier.derivative_matrix(harmonics, base_frequency).T
+        t, valid = (np.asarray(a) for a in crossings_compiled(system, float(omega), xc, vc,
+                                                               nu, samples))
+        base, w = mesh_period_rule(np.concatenate([fixed, t[valid]]), 2 * harmonics + 8)
+        tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+        q, qd = _synthesize(xc, base_frequency, np.cos(tau), np.sin(tau))
+        rows.append(periodic_summary(model, float(omega), (base * nu) % 1.0, q, qd, w, float(u_s), float(r),
+                                     keys=keys))
+    return {key: np.array([float(row[key]) for row in rows]) for key in keys}
 
 
 def _impulse_power(model, omegas, coefficients, harmonics, nu):
@@ -174,7 +212,7 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=SUMMAR
     coefficients, reaction = _decode(model, zs, hb)
     u_static = np.broadcast_to(np.asarray(model.static_windup(omegas), dtype=float), omegas.shape)
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
-                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], keys)
+                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], keys, hb.samples)
              for k in range(0, len(omegas), READ_OUT_BATCH)]
     return {key: np.concatenate([part[key] for part in parts]) for key in keys}
 
