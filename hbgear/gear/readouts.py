@@ -11,8 +11,13 @@ Powers (means over the period, MODEL.md section 4):
 - output ``<T_out (Omega_g + theta_g')>``: ``T_out = T_g`` (torques), the spring's reaction
   ``k_b theta_g + c_b theta_g'`` (spring), the solved mean output torque (reaction);
 - loss = input - output, which must equal the friction loss
-  ``-<T_fp (Omega_p + theta_p') + T_fg (Omega_g + theta_g')>`` plus the mesh power
-  ``<F_mesh delta'>``.
+  ``-<T_fp (Omega_p + theta_p') + T_fg (Omega_g + theta_g') + F_fp x_p' + F_fg x_g'>`` plus the mesh
+  power ``<F_mesh delta'>`` plus, on bearings and shafts (MODEL.md section 10), their damper losses
+  ``<sum c v^2>`` (``mean_bearing_loss_W``, ``mean_shaft_loss_W``). With shafts the input and output
+  speeds are those of the drive and load inertias.
+
+Bearing forces (with bearings): ``k y + c y'`` per gear and direction (the static load included),
+their mean, RMS about the mean and peak-to-peak (:data:`BEARING_FORCES`, :func:`summary_keys`).
 
 With a single DTE coordinate (torques) the rigid-body speeds are the nominal ones.
 
@@ -24,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["order_amplitudes", "periodic_summary", "SUMMARY_KEYS"]
+__all__ = ["order_amplitudes", "periodic_summary", "SUMMARY_KEYS", "BEARING_FORCES", "bearing_keys", "summary_keys"]
 
 SUMMARY_KEYS = (
     "dte_mean_um",
@@ -37,6 +42,25 @@ SUMMARY_KEYS = (
     "mean_friction_loss_W",
     "mean_mesh_power_W",
 )
+
+#: The bearing forces of :meth:`~hbgear.gear.model.GearPairModel.bearing_forces`, in output order.
+BEARING_FORCES = ("pinion_loa", "pinion_oloa", "gear_loa", "gear_oloa")
+
+
+def bearing_keys(statistics=("rms", "p2p", "mean")) -> tuple:
+    """``bearing_force_<gear>_<direction>_<statistic>_N`` for every bearing force, statistic by statistic."""
+    return tuple(f"bearing_force_{name}_{stat}_N" for stat in statistics for name in BEARING_FORCES)
+
+
+def summary_keys(model) -> tuple:
+    """The keys :func:`periodic_summary` returns for `model`: :data:`SUMMARY_KEYS`, and with bearings
+    :func:`bearing_keys` and ``mean_bearing_loss_W`` (with shafts also ``mean_shaft_loss_W``)."""
+    keys = SUMMARY_KEYS
+    if model.bearings is not None:
+        keys = keys + bearing_keys() + ("mean_bearing_loss_W",)
+    if model.shafts is not None:
+        keys = keys + ("mean_shaft_loss_W",)
+    return keys
 
 
 def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, reaction=0.0, xp=np) -> dict:
@@ -53,18 +77,22 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
     of shape ``(P, 1)`` and ``s`` of shape ``(1, n)`` give every read-out with shape ``(P,)``
     (means and extremes are over the last axis).
 
-    **Returns:** a dict with :data:`SUMMARY_KEYS` (µm, W, -).
+    **Returns:** a dict with :func:`summary_keys` (µm, W, N, -).
     """
     w = weights
     delta = q[0]
-    mean = xp.sum(w * delta, axis=-1)
-    rms = xp.sqrt(xp.sum(w * (delta - mean[..., None]) ** 2, axis=-1))
+    mean, rms = _mean_rms(delta, w, xp)
     mesh = model.mesh_force(s, q, qd, omega_pinion, xp)
     wp_tot, wg_tot = model.angular_velocities(qd, omega_pinion, nominal=False)
-    t_fp, t_fg = model.friction_torques(s, q, qd, omega_pinion, xp)
-    friction_loss = -xp.sum(w * (t_fp * wp_tot + t_fg * wg_tot), axis=-1)
+    t_fp, t_fg, f_fp, f_fg = model.friction_actions(s, q, qd, omega_pinion, xp)
+    friction_power = t_fp * wp_tot + t_fg * wg_tot
+    if model.bearings is not None:
+        lay = model.layout
+        friction_power = friction_power + f_fp * qd[lay.index("x_p")] + f_fg * qd[lay.index("x_g")]
+    friction_loss = -xp.sum(w * friction_power, axis=-1)
     mesh_power = xp.sum(w * mesh * qd[0], axis=-1)
-    input_power = model.torque_pinion_Nm * xp.sum(w * wp_tot, axis=-1)
+    w_in, w_out = (wp_tot, wg_tot) if model.shafts is None else model.body_speeds(qd, omega_pinion)
+    input_power = model.torque_pinion_Nm * xp.sum(w * w_in, axis=-1)
     rbg = model.base_radius_gear_m
     if model.boundary == "torques":
         output_torque = model.torque_gear_Nm + 0.0 * delta
@@ -72,7 +100,14 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
         output_torque = rbg * (model.spring_stiffness_N_per_m * (q[1] + u_static) + model.spring_damping_Ns_per_m * qd[1])
     else:
         output_torque = rbg * reaction + 0.0 * delta
-    output_power = xp.sum(w * output_torque * wg_tot, axis=-1)
+    output_power = xp.sum(w * output_torque * w_out, axis=-1)
+    extra = {}
+    for name, force in model.bearing_forces(q, qd).items():
+        f_mean, f_rms = _mean_rms(force, w, xp)
+        extra |= {f"bearing_force_{name}_rms_N": f_rms, f"bearing_force_{name}_p2p_N": _p2p(force, xp),
+                  f"bearing_force_{name}_mean_N": f_mean}
+    for group, loss in model.support_losses(qd).items():
+        extra[f"mean_{group[:-1]}_loss_W"] = xp.sum(w * loss, axis=-1)
     return {
         "dte_mean_um": 1e6 * mean,
         "dte_rms_um": 1e6 * rms,
@@ -83,7 +118,17 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
         "mean_power_loss_W": input_power - output_power,
         "mean_friction_loss_W": friction_loss,
         "mean_mesh_power_W": mesh_power,
-    }
+    } | extra
+
+
+def _mean_rms(x, w, xp):
+    """Mean and RMS about the mean over the period's quadrature (last axis)."""
+    mean = xp.sum(w * x, axis=-1)
+    return mean, xp.sqrt(xp.sum(w * (x - mean[..., None]) ** 2, axis=-1))
+
+
+def _p2p(x, xp):
+    return xp.max(x, axis=-1) - xp.min(x, axis=-1)
 
 
 def order_amplitudes(coefficients, nu: int, orders, weights=None, rate_weights=None, base_frequency=None) -> np.ndarray:
