@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["order_amplitudes", "periodic_summary", "SUMMARY_KEYS", "BEARING_FORCES", "bearing_keys", "summary_keys"]
+__all__ = ["order_amplitudes", "periodic_summary", "SUMMARY_KEYS", "BEARING_FORCES", "bearing_coefficients",
+           "bearing_keys", "bearing_weights", "summary_keys"]
 
 SUMMARY_KEYS = (
     "dte_mean_um",
@@ -119,6 +120,41 @@ def periodic_summary(model, omega_pinion, s, q, qd, weights, u_static=0.0, react
         "mean_friction_loss_W": friction_loss,
         "mean_mesh_power_W": mesh_power,
     } | extra
+
+
+def bearing_weights(model) -> dict:
+    """Each bearing force as the linear read-out ``w.q + v.q' + f_0`` of the coordinates:
+    name -> ``(w, v, f_0)`` (``w``, ``v`` of shape ``(ndof,)``, ``f_0`` the static load [N]), from
+    :meth:`~hbgear.gear.model.GearPairModel.bearing_forces` itself (it is affine in ``q, q'``)."""
+    n = model.ndof
+    zero = np.zeros((n, 1))
+    base = {k: float(np.asarray(v)[0]) for k, v in model.bearing_forces(zero, zero).items()}
+    out = {name: (np.zeros(n), np.zeros(n), value) for name, value in base.items()}
+    for j in range(n):
+        unit = np.zeros((n, 1))
+        unit[j] = 1.0
+        for name, value in model.bearing_forces(unit, zero).items():
+            out[name][0][j] = float(np.asarray(value)[0]) - base[name]
+        for name, value in model.bearing_forces(zero, unit).items():
+            out[name][1][j] = float(np.asarray(value)[0]) - base[name]
+    return out
+
+
+def bearing_coefficients(model, coefficients, base_frequency) -> dict:
+    """Fourier coefficients [N] of every bearing force (:func:`bearing_weights`) of ``P`` solutions:
+    `coefficients` ``(P, ndof, 2H+1)`` [m] on the base frequency `base_frequency` ``(P,)`` [rad/s];
+    name -> ``(P, 2H+1)`` (empty with rigid bearings)."""
+    c = np.asarray(coefficients, dtype=float)
+    harmonics = (c.shape[-1] - 1) // 2
+    kw = np.arange(1, harmonics + 1) * np.reshape(np.asarray(base_frequency, dtype=float), (-1, 1))  # (P, H)
+    rate = np.zeros_like(c)
+    rate[..., 1::2], rate[..., 2::2] = kw[:, None] * c[..., 2::2], -kw[:, None] * c[..., 1::2]
+    out = {}
+    for name, (w, v, f0) in bearing_weights(model).items():
+        force = np.einsum("i,pik->pk", w, c) + np.einsum("i,pik->pk", v, rate)
+        force[:, 0] += f0
+        out[name] = force
+    return out
 
 
 def _mean_rms(x, w, xp):

@@ -22,7 +22,7 @@ from ..errors import ConvergenceError
 from ..engine.hb import HarmonicBalance, _breakpoint_key
 from ..engine.response import PeriodicSolution as EnginePeriodicSolution
 from ..engine.response import newton_solve, synthesize
-from .readouts import SUMMARY_KEYS, periodic_summary
+from .readouts import bearing_coefficients, periodic_summary, summary_keys
 from .model import GearPairModel
 from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
 from .system import GearSystem
@@ -94,6 +94,19 @@ class PeriodicSolution(EnginePeriodicSolution):
                    samples=hb.samples, z=np.asarray(z), residual_norm=float(residual_norm), iterations=int(iterations),
                    multipliers=multipliers, u_static_m=float(model.static_windup(omega_pinion)))
 
+    def bearing_harmonic_table(self) -> tuple[list[str], list[list]]:
+        """``harmonics.csv`` on bearings: the DTE columns of :meth:`harmonic_table` and, per bearing
+        force, its amplitude [N] at each order (the mean at order 0). **Returns:** ``(header, rows)``."""
+        header = ["mesh_order", "dte_amplitude_um", "dte_phase_deg"]
+        rows = [list(r) for r in self.harmonic_table()]
+        base = self.model.speeds(self.omega_pinion)[2] / self.nu
+        for name, force in bearing_coefficients(self.model, self.coefficients[None], np.array([base])).items():
+            mean, amp, _ = fourier.harmonic_amplitudes(force[0], self.harmonics)
+            header.append(f"bearing_force_{name}_amplitude_N")
+            for k, row in enumerate(rows):
+                row.append(float(mean) if k == 0 else float(amp[k - 1]))
+        return header, rows
+
     def harmonic_table(self):
         """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
         mean, amp, phase = fourier.harmonic_amplitudes(self.coefficients[0], self.harmonics)
@@ -124,6 +137,9 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -
     # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
     dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
     out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    for name, force in bearing_coefficients(model, coefficients, base_frequency[:, 0, 0]).items():  # likewise
+        key = f"bearing_force_{name}_p2p_N"
+        out[key] = np.maximum(out[key], np.ptp(fourier.synthesize(force, harmonics, 16 * harmonics), axis=-1))
     out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
     return out
 
@@ -172,7 +188,7 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
                         hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
              for k in range(0, len(omegas), READ_OUT_BATCH)]
-    return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
+    return {key: np.concatenate([part[key] for part in parts]) for key in summary_keys(model)}
 
 
 #: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by
