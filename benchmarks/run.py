@@ -58,6 +58,7 @@ def main(argv=None):
 
 
 def _run(q):
+    import bench_bearings
     import bench_duffing_tools
     import bench_frc_vs_ti
     import bench_large_harmonics
@@ -88,6 +89,9 @@ def _run(q):
     print("\n## 6. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
     large = bench_large_harmonics.run(q)
     print(bench_large_harmonics.table(large), flush=True)
+    print("\n## 7. bearings and shafts: 6 and 8 DOF against the 2-DOF cost (H = 32)", flush=True)
+    bear = bench_bearings.run(q)
+    print(bench_bearings.table(bear), flush=True)
 
     t = b["timer"]
     pts = b["points"]
@@ -157,6 +161,10 @@ def _run(q):
         ("6", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
          f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
+    for coupling, r in bear.items():
+        rows += [("7", f"{coupling} per continuation point, 8 DOF / 2 DOF", f"{r['point_ratio'][8]:.2f}x", "<= 4x"),
+                 ("7", f"{coupling} per continuation point, 6 DOF / 2 DOF", f"{r['point_ratio'][6]:.2f}x", ""),
+                 ("7", f"{coupling} per Hill evaluation, 8 DOF / 2 DOF", f"{r['hill_ratio'][8]:.2f}x", "")]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")
     for r in rows:
