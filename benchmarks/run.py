@@ -62,6 +62,7 @@ def main(argv=None):
 
 
 def _run(q, nlvib=None):
+    import bench_bearings
     import bench_commands
     import bench_duffing_tools
     import bench_frc_vs_ti
@@ -93,6 +94,9 @@ def _run(q, nlvib=None):
     print("\n## 7. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
     large = bench_large_harmonics.run(q)
     print(bench_large_harmonics.table(large), flush=True)
+    print("\n## 8. bearings and shafts: 6 and 8 DOF against the 2-DOF cost (H = 32)", flush=True)
+    bear = bench_bearings.run(q)
+    print(bench_bearings.table(bear), flush=True)
 
     print("\n## 6. the whole commands against same-run references (the speed table)", flush=True)
     commands = bench_commands.run(q)
@@ -167,6 +171,10 @@ def _run(q, nlvib=None):
          f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
     rows += _command_rows(commands, hbd, others)
+    for coupling, r in bear.items():
+        rows += [("8", f"{coupling} per continuation point, 8 DOF / 2 DOF", f"{r['point_ratio'][8]:.2f}x", "<= 4x"),
+                 ("8", f"{coupling} per continuation point, 6 DOF / 2 DOF", f"{r['point_ratio'][6]:.2f}x", ""),
+                 ("8", f"{coupling} per Hill evaluation, 8 DOF / 2 DOF", f"{r['hill_ratio'][8]:.2f}x", "")]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>18s} {'goal':>9s}")
     for r in rows:

@@ -23,6 +23,7 @@ import importlib
 #: Public name -> module that defines it (imported on first access).
 _EXPORTS = {
     "solve": "api", "frequency_response": "api", "simulate": "api", "stability_map": "api",
+    "natural_frequencies": "api",
     "FrequencyResponse": "api", "SystemFrequencyResponse": "api",
     "study": "studies", "load_study": "studies", "StudyResult": "studies",
     "load_config": "config", "parse_config": "config", "RunConfig": "config",

@@ -26,7 +26,7 @@ from .gear.contact import (
 from .gear.geometry import GearPair
 from .gear.kelley_lemanski import ROUGHNESS_CLIP_UIN, MICROINCH_PER_UM
 
-__all__ = ["ToothContact", "build_geometry", "build_model", "build_pair_stiffness", "build_tooth_contact",
+__all__ = ["ToothContact", "build_bearings", "build_geometry", "build_model", "build_shafts", "build_pair_stiffness", "build_tooth_contact",
            "check_config", "friction_law", "model_at_contact_ratio"]
 
 #: Largest Kelley-Lemanski roughness accepted [um]: where the roughness factor's guard starts.
@@ -210,7 +210,36 @@ def build_model(cfg, contact_ratio: float | None = None):
         damping_model=mesh.damping_model,
         contact=contact,
         lti_friction=fr.lti_friction,
+        bearings=build_bearings(cfg),
+        shafts=build_shafts(cfg),
     )
+
+
+def build_bearings(cfg):
+    """:class:`~hbgear.gear.dofs.Bearings` of ``[bearings]`` (``None`` without the section: rigid)."""
+    from .gear.dofs import Bearings
+
+    b = cfg.bearings
+    if b is None:
+        return None
+    mass_pinion, mass_gear = b.masses(cfg.gear)
+    return Bearings(mass_pinion_kg=mass_pinion, mass_gear_kg=mass_gear,
+                    k_pinion_loa_N_per_m=b.stiffness("pinion", "loa"), k_pinion_oloa_N_per_m=b.stiffness("pinion", "oloa"),
+                    k_gear_loa_N_per_m=b.stiffness("gear", "loa"), k_gear_oloa_N_per_m=b.stiffness("gear", "oloa"),
+                    damping_ratio=b.damping_ratio)
+
+
+def build_shafts(cfg):
+    """:class:`~hbgear.gear.dofs.Shafts` of ``[shafts]`` (``None`` without the section)."""
+    from .gear.dofs import Shafts
+
+    sh = cfg.shafts
+    if sh is None:
+        return None
+    return Shafts(inertia_drive_kgm2=sh.drive_inertia_kgm2, inertia_load_kgm2=sh.load_inertia_kgm2,
+                  stiffness_drive_Nm_per_rad=sh.drive_stiffness_Nm_per_rad,
+                  stiffness_load_Nm_per_rad=sh.load_stiffness_Nm_per_rad,
+                  damping_ratio_drive=sh.damping_ratio, damping_ratio_load=sh.damping_ratio)
 
 
 def model_at_contact_ratio(cfg, contact_ratio: float):

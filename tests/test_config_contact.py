@@ -311,6 +311,9 @@ def test_to_dict_carries_the_new_keys_and_round_trips(data):
     cfg = parse_config(data)
     again = parse_config(cfg.to_dict())
     for section in dataclasses.fields(RunConfig):
+        if getattr(cfg, section.name) is None:  # an optional section left out ([bearings], [shafts])
+            assert getattr(again, section.name) is None, section.name
+            continue
         a, b = dataclasses.asdict(getattr(cfg, section.name)), dataclasses.asdict(getattr(again, section.name))
         assert a.keys() == b.keys()
         for key in a:

@@ -22,7 +22,7 @@ from ..errors import ConvergenceError
 from ..engine.hb import HarmonicBalance, _breakpoint_key
 from ..engine.response import PeriodicSolution as EnginePeriodicSolution
 from ..engine.response import newton_solve, synthesize
-from .readouts import SUMMARY_KEYS, periodic_summary
+from .readouts import bearing_coefficients, periodic_summary, summary_keys
 from .model import GearPairModel
 from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis, mesh_period_rule
 from .system import GearSystem
@@ -94,6 +94,19 @@ class PeriodicSolution(EnginePeriodicSolution):
                    samples=hb.samples, z=np.asarray(z), residual_norm=float(residual_norm), iterations=int(iterations),
                    multipliers=multipliers, u_static_m=float(model.static_windup(omega_pinion)))
 
+    def bearing_harmonic_table(self) -> tuple[list[str], list[list]]:
+        """``harmonics.csv`` on bearings: the DTE columns of :meth:`harmonic_table` and, per bearing
+        force, its amplitude [N] at each order (the mean at order 0). **Returns:** ``(header, rows)``."""
+        header = ["mesh_order", "dte_amplitude_um", "dte_phase_deg"]
+        rows = [list(r) for r in self.harmonic_table()]
+        base = self.model.speeds(self.omega_pinion)[2] / self.nu
+        for name, force in bearing_coefficients(self.model, self.coefficients[None], np.array([base])).items():
+            mean, amp, _ = fourier.harmonic_amplitudes(force[0], self.harmonics)
+            header.append(f"bearing_force_{name}_amplitude_N")
+            for k, row in enumerate(rows):
+                row.append(float(mean) if k == 0 else float(amp[k - 1]))
+        return header, rows
+
     def harmonic_table(self):
         """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
         mean, amp, phase = fourier.harmonic_amplitudes(self.coefficients[0], self.harmonics)
@@ -111,13 +124,14 @@ def _decode(model: GearPairModel, z, hb: HarmonicBalance):
 _synthesize = synthesize
 
 
-def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=SUMMARY_KEYS,
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=None,
                samples=None) -> dict:
     """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
     [m], `omegas`, `u_static`, `reaction` ``(P,)``; `keys` as there; `samples`: the solutions'
     AFT samples (where the friction loads jump at contact events, :func:`_event_split_summaries`).
     **Returns:** arrays ``(P,)``."""
+    keys = summary_keys(model) if keys is None else tuple(keys)
     omega = np.asarray(omegas, dtype=float)[:, None]
     _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
@@ -128,12 +142,16 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, k
     if "dte_p2p_um" in out:  # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
         dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
         out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    for name, force in bearing_coefficients(model, coefficients, base_frequency[:, 0, 0]).items():  # likewise
+        key = f"bearing_force_{name}_p2p_N"
+        if key in out:
+            out[key] = np.maximum(out[key], np.ptp(fourier.synthesize(force, harmonics, 16 * harmonics), axis=-1))
     if model.contact_events(np.zeros(1), np.zeros((model.ndof, 1)), 0.0) is not None:
         split = _event_split_summaries(model, omega[:, 0], coefficients, harmonics, nu, u_static, reaction, samples,
                                        keys)
-        out.update({key: split[key] for key in keys if key not in ("dte_p2p_um", "dynamic_factor")})
-        if "dynamic_factor" in keys:
-            out["dynamic_factor"] = np.maximum(out["dynamic_factor"], split["dynamic_factor"])
+        for key in keys:  # extremes: the larger of both rules; integrals: the split rule's
+            out[key] = (np.maximum(out[key], split[key]) if key == "dynamic_factor" or key.endswith("_p2p_N")
+                        else out[key] if key == "dte_p2p_um" else split[key])
     if "mean_mesh_power_W" in out:
         out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients,
                                                                              harmonics, nu)
@@ -141,7 +159,7 @@ def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, k
 
 
 def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, samples=None,
-                           keys=SUMMARY_KEYS) -> dict:
+                           keys=None) -> dict:
     """The summaries point by point with the quadrature also split at the contact events.
 
     Where the friction loads jump at a flank's contact (:meth:`GearPairModel.contact_events`) the
@@ -151,6 +169,7 @@ def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static,
     """
     from ..engine.events import crossings_compiled
 
+    keys = summary_keys(model) if keys is None else tuple(keys)
     system = GearSystem(model)
     samples = samples or max(1024, 4 * harmonics * nu + 2)
     phases = np.asarray(model.phase_breakpoints(), dtype=float)
@@ -204,7 +223,7 @@ def _node_states(coefficients, base_frequency, basis, nu: int):
 READ_OUT_BATCH = 512
 
 
-def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=SUMMARY_KEYS) -> dict:
+def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=None) -> dict:
     """``PeriodicSolution.from_z(model, w, z, hb).summary()`` for every point ``(omegas[i],
     zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary
     (`keys`: only those, see :func:`~hbgear.gear.readouts.periodic_summary`)."""
@@ -214,7 +233,7 @@ def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=SUMMAR
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
                         hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], keys, hb.samples)
              for k in range(0, len(omegas), READ_OUT_BATCH)]
-    return {key: np.concatenate([part[key] for part in parts]) for key in keys}
+    return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
 
 #: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by
