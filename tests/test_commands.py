@@ -93,6 +93,7 @@ def test_solve_writes_solution_with_balanced_powers(tmp_path, model_name):
     close = 1e-12 if model_name == "LTV" else 2e-8  # measured 4e-14 / 7.9e-9 (NLTV: the AFT's N = 256)
     assert soft.size == 2 and np.abs(np.sort_complex(soft) - np.sort_complex(soft_exact)).max() < close
     assert data["max_abs_floquet"] == pytest.approx(np.abs(soft_exact).max(), abs=close)
+    assert hill.size > 0 and np.abs(hill).max() <= data["max_abs_floquet"] + 1e-15  # over all multipliers
     # LTV: |mult| = 1 - 3.4e-14; NLTV friction damps the mode, 1 - 2.9e-6
     assert (abs(1 - data["max_abs_floquet"]) < 1e-12) if model_name == "LTV" else (1e-6 < 1 - data["max_abs_floquet"] < 1e-5)
     assert data["stable"] is True

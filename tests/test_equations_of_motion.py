@@ -438,7 +438,7 @@ def test_kinematics_is_involute_action_and_model_md_section_10():
     """The compression rate does not depend on the contact position and has no nominal part
     (``Omega_p R_bp = Omega_g R_bg``); ``delta`` and ``V_s`` are MODEL.md §10's."""
     kin = dv.kinematics()
-    S, (phi_p, phi_g, y_p, x_p, y_g, x_g), (dphi_p, dphi_g, _, dx_p, _, dx_g) = dv.S, dv.Q_SYM, dv.V_SYM
+    S, (phi_p, phi_g, y_p, _, y_g, _), (dphi_p, dphi_g, _, dx_p, _, dx_g) = dv.S, dv.Q_SYM, dv.V_SYM
     m, zg, phi = sp.symbols("m Z_g phi", positive=True)
     gears = {S["R_bp"]: m * S["Z_p"] * sp.cos(phi) / 2, S["R_bg"]: m * zg * sp.cos(phi) / 2,
              S["W_g"]: S["W_p"] * S["Z_p"] / zg}
@@ -462,7 +462,7 @@ def test_kinematics_is_involute_action_and_model_md_section_10():
 def test_derived_equations_are_model_md_section_10():
     """The equations from Lagrange and virtual work are MODEL.md §4/§10's, term by term."""
     eq = dv.equations("linear")
-    S, (phi_p, phi_g, y_p, x_p, y_g, x_g), (dphi_p, dphi_g, dy_p, dx_p, dy_g, dx_g) = dv.S, dv.Q_SYM, dv.V_SYM
+    S, (_, phi_g, y_p, x_p, y_g, x_g), (_, dphi_g, dy_p, dx_p, dy_g, dx_g) = dv.S, dv.Q_SYM, dv.V_SYM
     kin = dv.kinematics()
     x = kin.delta - kin.eps
     f_mesh = S["k"] * x + S["c"] * (kin.delta_rate - sp.diff(kin.eps, dv.t))

@@ -5,7 +5,6 @@ study.csv, the Dask path = the local path, load_study / to_dataframe."""
 import csv
 import json
 import math
-import os
 import signal
 import subprocess
 import sys

@@ -81,7 +81,7 @@ def plot_and_note(results, out=OUT):
         )
     spring = {k[1]: v[1].summary["mean_friction_loss_W"] for k, v in results.items() if k[0] == "spring"}
     slope = spring[RPM] / RPM
-    note = f"""# Fig. 7 -- net input power, constant torques vs soft output spring
+    note = """# Fig. 7 -- net input power, constant torques vs soft output spring
 
 Reference pair (Table 1 completed, Gamma 1.433), LTV, Coulomb mu0 = 0.1, formulation A, zeta 0.01,
 boundary damping ratio 0 (the soft mode is deflated by the integrator, see hbgear.gear.simulate).

@@ -42,11 +42,12 @@ past ``p0``. Only converged points are ever stored: no silent gaps.
   landing on ``p_end``, stops.
 """
 
-from .branch import MESSAGES, Branch, PointKind, Status
-from .compiled import _JIT_CACHE, SEGMENT_POINTS, _Compiled, _jit_corrector
-from .corrector import CHORD_ITERATION_WORK, _python_corrector
+# the internals below are re-exported for the tests and the benchmarks (not public API)
+from .branch import MESSAGES, Branch, PointKind, Status  # noqa: F401
+from .compiled import _JIT_CACHE, SEGMENT_POINTS, _Compiled, _jit_corrector  # noqa: F401
+from .corrector import CHORD_ITERATION_WORK, _python_corrector  # noqa: F401
 from .driver import continuation
-from .folds import IllinoisBracket, illinois
+from .folds import IllinoisBracket, illinois  # noqa: F401
 from .options import PseudoArclength, sweep_method
 
 __all__ = ["PseudoArclength", "continuation", "sweep_method", "Branch", "Status", "PointKind"]
