@@ -31,6 +31,7 @@ from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
 from hbgear.gear.simulate import march
 from hbgear.gear.solve import rad_s_to_rpm, rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import linear_equivalent
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -48,9 +49,13 @@ def models(formulation: str = "A"):
 
 
 def unstable_zones(model, rpm_lo=1440.0, rpm_hi=1520.0, steps=1601):
-    """``[(start_rpm, stop_rpm, max |multiplier|, sign of the leading multiplier, rpm of the max)]``."""
+    """``[(start_rpm, stop_rpm, max |multiplier|, sign of the leading multiplier, rpm of the max)]``.
+
+    LTV-B's loads ``sigma_j |F_mesh|`` are affine only while ``F_mesh > 0``: the zones are those of
+    its linear equivalent (signed loads, :func:`hbgear.gear.system.linear_equivalent`), the
+    stability of the periodic solutions that keep a compressive mesh force, as LTV-A's."""
     speeds = np.linspace(rpm_lo, rpm_hi, steps)
-    mult = monodromy.multipliers_linear(model, rpm_to_rad_s(speeds))
+    mult = monodromy.multipliers_linear(linear_equivalent(model), rpm_to_rad_s(speeds))
     mod = np.max(np.abs(mult), axis=-1)
     bad = mod > 1.0 + 1e-9
     zones, i = [], 0
@@ -85,7 +90,7 @@ def nltv_scan(ltv, nltv, rpms, harmonics):
     rows, z = [], None
     for rpm in rpms:
         omega = rpm_to_rad_s(float(rpm))
-        m_ltv = float(np.max(np.abs(monodromy.multipliers_linear(ltv, omega))))
+        m_ltv = float(np.max(np.abs(monodromy.multipliers_linear(linear_equivalent(ltv), omega))))
         try:
             sol = solve_periodic(nltv, omega, harmonics=harmonics, samples=8 * harmonics, z0=z)
             z = sol.z

@@ -32,6 +32,7 @@ from hbgear.config import load_config
 from hbgear.errors import ConvergenceError
 from hbgear.gear.simulate import march
 from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
+from hbgear.gear.system import linear_equivalent
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -109,7 +110,7 @@ def ti_ratio_map(speeds_rpm, ratios, formulations=("A", "B"), *, cycles: int = T
         m["kind"] = np.full(shape, "", dtype=object)
         ltv_cfg, _ = _configs(zeta, f)
         for i, g in enumerate(ratios):
-            m["mult"][i] = np.max(np.abs(monodromy.multipliers_linear(model_at_contact_ratio(ltv_cfg, g),
+            m["mult"][i] = np.max(np.abs(monodromy.multipliers_linear(linear_equivalent(model_at_contact_ratio(ltv_cfg, g)),
                                                                rpm_to_rad_s(np.asarray(speeds_rpm, float)))), axis=-1)
             for j in range(len(speeds_rpm)):
                 p_l, p_n = next(it)
@@ -133,7 +134,7 @@ def ratio_map(speeds_rpm, ratios, *, harmonics: int = 32, samples: int = 256, ze
         ltv = model_at_contact_ratio(cfg_ltv, gamma)
         nltv = model_at_contact_ratio(cfg_nltv, gamma)
         omegas = rpm_to_rad_s(np.asarray(speeds_rpm, float))
-        mult[i] = np.max(np.abs(monodromy.multipliers_linear(ltv, omegas)), axis=-1)
+        mult[i] = np.max(np.abs(monodromy.multipliers_linear(linear_equivalent(ltv), omegas)), axis=-1)
         z = None
         for j, omega in enumerate(omegas):
             p_ltv[i, j] = solve_periodic(ltv, float(omega), harmonics=harmonics, samples=samples).summary()["dte_p2p_um"]

@@ -393,7 +393,7 @@ def check_hill():
     from hbgear.gear import monodromy
     from hbgear.engine.hb import HarmonicBalance
     from hbgear.gear.solve import solve_periodic
-    from hbgear.gear.system import GearSystem
+    from hbgear.gear.system import GearSystem, linear_equivalent
 
     plt = _plt()
     speeds = (7000.0, 13400.0, 20000.0, 26800.0)
@@ -406,9 +406,17 @@ def check_hill():
         worst = 0.0
         for i, rpm in enumerate(speeds):
             sol = solve_periodic(model, rad(rpm), harmonics=64)
+            equivalent = linear_equivalent(model, sol)  # LTV-B: the signed loads while F_mesh > 0
+            if equivalent is None:
+                # the mesh force reverses (LTV-B at resonance): the kink of |F_mesh| makes the AFT err
+                # at O(1/N^2) (Hill vs variational 6.0e-5, 1.6e-5, 6.1e-6, 5.0e-6 at N = 512 ... 4096,
+                # measured), so N = 4096 here, and the variational equations as the reference
+                sol = solve_periodic(model, rad(rpm), harmonics=64, samples=4096, z0=sol.z)
+                exact = np.linalg.eigvals(monodromy.monodromy_variational(model, sol, rad(rpm)))
+            else:
+                exact = monodromy.multipliers_linear(equivalent, rad(rpm))
             hb = HarmonicBalance(model.ndof, sol.harmonics, sol.nu, sol.samples)
             hill = floquet.hill_multipliers(hb, sol.z, rad(rpm), GearSystem(model))
-            exact = monodromy.multipliers_linear(model, rad(rpm))
             dist = float(np.max(np.min(np.abs(exact[:, None] - hill[None, :]), axis=1)))
             worst = max(worst, dist)
             agree = floquet.is_stable(hill) == floquet.is_stable(exact)
@@ -429,7 +437,10 @@ def check_hill():
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     note = f"""Reference pair, single-coordinate `torques` boundary, LTV with Coulomb mu0 = 0.1. Monodromy: the exact
 product of matrix exponentials (formulation A, the paper's Eq. 20) or fourth-order Magnus steps
-between the breakpoints (formulation B); Hill: companion eigenproblem of the HB Jacobian, H = 64.
+between the breakpoints (formulation B, its loads `sigma_j F_mesh` while the mesh force stays
+compressive: `hbgear.gear.system.linear_equivalent`, checked on each solution; where the mesh
+force reverses, at the primary resonance, the variational equations integrated along the HB
+solution instead); Hill: companion eigenproblem of the HB Jacobian, H = 64.
 
 {md_table(["model", "rpm", "multipliers (monodromy)", "max distance Hill", "max |mult|", "verdict"], table)}
 
@@ -928,8 +939,12 @@ def check_fig14():
     ]
     for f, ti in result["ti"].items():
         rows += [
-            row(f"TI-{f}: LTV growth per cycle vs exact multiplier, diverging points (max rel. diff.)",
-                ti["ltv_rate_vs_multiplier"], 0.01, percent=True),
+            # A: the diverging LTV motion is linear (loads sigma_j N); B: once it reverses the mesh
+            # force its loads sigma_j |F_mesh| (MODEL.md section 11) are piecewise linear, and its growth
+            # leaves the linear equivalent's multiplier (information, not a check)
+            row(f"TI-{f}: LTV growth per cycle vs exact multiplier, diverging points (max rel. diff.)"
+                + ("" if f == "A" else " (info: piecewise linear once F_mesh reverses)"),
+                ti["ltv_rate_vs_multiplier"], 0.01 if f == "A" else None, percent=True),
             row(f"TI-{f}: largest gamma over the grid (info)", ti["gamma_max"], None),
             row(f"TI-{f}: grid points with gamma > 100 (info)", ti["n_gamma_gt_100"], None, fmt=".0f"),
         ]
