@@ -63,6 +63,19 @@ class FrequencyResponse(_gear.GearFrequencyResponse):
         orders = self.mesh_orders() if orders is None else orders
         return orders_figure(self, orders, self.order_amplitudes_um(orders), self.resonance, title)
 
+    def plot_bearing_orders(self, name: str, orders=None, title: str | None = None):
+        """Order tracking of one bearing force (`name`: ``pinion_loa``, ``pinion_oloa``, ``gear_loa``,
+        ``gear_oloa``; on bearings only), as :meth:`plot_orders` in N (``bearing_orders_<name>.png``)."""
+        from .outputs.plots import orders_figure
+
+        orders = self.mesh_orders() if orders is None else orders
+        amplitudes = self.bearing_order_amplitudes_N(orders)
+        if name not in amplitudes:
+            raise ValueError(f"no bearing force {name!r} on this model; it has {sorted(amplitudes) or 'none'}")
+        gear, direction = name.split("_")
+        return orders_figure(self, orders, amplitudes[name], self.resonance, title,
+                             quantity=f"{gear} {direction.upper()} bearing force", unit="N")
+
     def plot_dynamic_factor(self, title: str | None = None):
         """The ``dynamic_factor.png`` figure: ``max F_mesh / N`` against speed with ISO 6336-1's ``n_E1`` and ranges."""
         from .outputs.plots import dynamic_factor_figure

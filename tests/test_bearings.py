@@ -273,3 +273,8 @@ def test_frc_command_on_bearings_writes_the_bearing_columns(tmp_path):
         assert float(first[name]) == pytest.approx(summary[name], rel=1e-6)
         assert float(first[name]) > 0
     assert (out / "bearing_forces.png").stat().st_size > 0 and (out / "modes.json").exists()
+    for name in ("pinion_loa", "pinion_oloa", "gear_loa", "gear_oloa"):  # order tracking of each force
+        assert (out / f"bearing_orders_{name}.png").stat().st_size > 0
+    # the order figure's numbers are orders.csv's bearing columns
+    orders = list(csv.DictReader((out / "orders.csv").open()))
+    assert float(orders[0]["bearing_force_gear_oloa_order_1_N"]) > 0

@@ -15,8 +15,9 @@ Load -> build -> :func:`hbgear.frequency_response` -> write, into the output dir
   ``floquet.png``, timings (``outputs``: the CSV files; ``total``: up to this file), the config;
 - ``modes.json`` and ``campbell.png``: the natural frequencies of the mean-stiffness model
   (:func:`hbgear.natural_frequencies`) and the Campbell diagram (mesh orders against speed);
-- on bearings, ``frc.csv`` and ``orders.csv`` gain the bearing forces and ``bearing_forces.png``
-  shows their RMS (LOA, OLOA) against speed;
+- on bearings, ``frc.csv`` and ``orders.csv`` gain the bearing forces, ``bearing_forces.png``
+  shows their RMS (LOA, OLOA) against speed and ``bearing_orders_<gear>_<direction>.png`` each
+  force's order tracking (as ``orders.png``, in N);
 - the figures, drawn last, once the numbers are on disk (matplotlib is imported only then):
   ``frc.png`` the curve (:func:`hbgear.outputs.plots.frc_figure`); ``orders.png`` order tracking
   (order lines and the speed x order map); ``dynamic_factor.png`` ``max F_mesh / N`` with ``n_E1``
@@ -193,9 +194,12 @@ def run(config, args, out_dir) -> int:
     save_figure_atomic(curve.plot_dynamic_factor(), out_dir / "dynamic_factor.png", dpi=120)
     save_figure_atomic(curve.plot_campbell(max(int(orders.max()), 1)), out_dir / "campbell.png", dpi=120)
     if curve.model.bearings is not None:
+        from ..gear.readouts import BEARING_FORCES
         from ..outputs.plots import bearing_forces_figure
 
         save_figure_atomic(bearing_forces_figure(curve, modes=modes), out_dir / "bearing_forces.png", dpi=120)
+        for name in BEARING_FORCES:
+            save_figure_atomic(curve.plot_bearing_orders(name, orders), out_dir / f"bearing_orders_{name}.png", dpi=120)
     if curve.response.stability is not None:
         save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
     if not curve.success:

@@ -130,7 +130,8 @@ def _order_map(speed, values_db, parts, bins: int):
     return edges, grid
 
 
-def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | None = None):
+def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | None = None, quantity: str = "DTE",
+                  unit: str = "um"):
     """Order tracking of a gear frequency-response curve: the DTE amplitude at each mesh order
     against speed (log scale; integer orders solid, half orders of ``nu = 2`` rows dashed), and the
     colour map speed x order in dB re 1 um (per speed cell the largest amplitude of the solutions
@@ -139,7 +140,9 @@ def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | Non
     map carries the curve ``order = n_E1 / n`` where an order's frequency is the mesh mode's.
 
     **Arguments:** `curve` (:class:`hbgear.api.FrequencyResponse`), `orders` (mesh orders),
-    `amplitudes_um` ``(rows, orders)`` (:meth:`~hbgear.gear.response.GearFrequencyResponse.order_amplitudes_um`).
+    `amplitudes_um` ``(rows, orders)`` (:meth:`~hbgear.gear.response.GearFrequencyResponse.order_amplitudes_um`);
+    `quantity`, `unit`: another read-out's name and unit (e.g. a bearing force in N: amplitudes in
+    N, the map in dB re 1 N).
     """
     from matplotlib import colormaps
     from matplotlib.lines import Line2D
@@ -162,13 +165,13 @@ def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | Non
     if not np.all(whole):
         handles.append(Line2D([], [], color="0.3", ls="--", lw=0.8, label="half orders (nu = 2)"))
     lines_ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    lines_ax.set_ylabel("DTE amplitude [um]")
+    lines_ax.set_ylabel(f"{quantity} amplitude [{unit}]")
     _plain_log_ticks(lines_ax.yaxis)
     lines_ax.grid(alpha=0.3)
 
     shown = np.argsort(orders, kind="stable")
     with np.errstate(divide="ignore"):
-        db = 20.0 * np.log10(amp[:, shown])  # re 1 um
+        db = 20.0 * np.log10(amp[:, shown])  # re 1 unit
     top = float(np.max(db[np.isfinite(db)])) if np.any(np.isfinite(db)) else 0.0
     floor = top - ORDER_MAP_RANGE_DB
     parts = [rows for rows, _ in _branch_rows(curve)]
@@ -180,7 +183,7 @@ def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | Non
                              shading="flat", rasterized=True)
     box = map_ax.get_position()
     fig.colorbar(mesh, cax=fig.add_axes((box.x1 + 0.015, box.y0, 0.02, box.height)),
-                 label="DTE amplitude [dB re 1 um]")
+                 label=f"{quantity} amplitude [dB re 1 {unit}]")
     n_grid = np.linspace(edges[0], edges[-1], 400)
     if resonance is not None and np.any((resonance.n_E1_rpm / n_grid >= order_edges[0])
                                         & (resonance.n_E1_rpm / n_grid <= order_edges[-1])):
@@ -192,7 +195,7 @@ def orders_figure(curve, orders, amplitudes_um, resonance=None, title: str | Non
     map_ax.set_xlabel("pinion speed [rpm]")
     _mesh_frequency_axis(lines_ax, float(curve.model.teeth_pinion))
     model = curve.model
-    fig.suptitle(title or f"DTE order tracking: {model.coupling} {model.formulation}, {model.boundary}, "
+    fig.suptitle(title or f"{quantity} order tracking: {model.coupling} {model.formulation}, {model.boundary}, "
                  f"H={curve.harmonics}, {len(speed)} rows", fontsize=10)
     return fig
 
