@@ -203,10 +203,7 @@ def _initial_state(model, omega, u_static, s0):
     if model.coupling == "LTI":
         delta = model.normal_load_N / model.k_mean_N_per_m + model.loaded_static_transmission_error(s, wm)[0]
     else:
-        eps, _ = model.static_transmission_error(s, wm)
-        delta = eps[0] + model.normal_load_N / model.mesh_stiffness(s)[0]
-        if model.contact == "backlash":
-            delta = delta + 0.5 * model.backlash_m
+        delta = model.static_dte(s, omega)[0]
     y0 = np.zeros(2 * model.ndof)
     y0[0] = float(delta)
     return y0
