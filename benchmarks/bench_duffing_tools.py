@@ -252,8 +252,9 @@ def run_pyharm(repeats):
 
 
 # ----------------------------------------------------------------------------- driver
-def run(quick=False, repeats=None):
-    """Returns ``(rows, notes)``; each row a dict (see :func:`table`)."""
+def run(quick=False, repeats=None, nlvib=None):
+    """Returns ``(rows, notes)``; each row a dict (see :func:`table`). `nlvib`: a local copy of
+    NLvib to run under Octave as well (:mod:`bench_nlvib`)."""
     repeats = repeats or (2 if quick else 5)
     checks = CHECK_W[::2] if quick else CHECK_W
     a = time.perf_counter()
@@ -274,6 +275,13 @@ def run(quick=False, repeats=None):
         same = run_hbgear(repeats, ds_max=ds)
         same["tool"] = f"hbgear (ds_max={ds:.3g}, ~pyHarm's point count)"
         rows.append(same)
+    if nlvib:
+        import bench_nlvib
+
+        row, more = bench_nlvib.run(nlvib, rows[-1]["points"], repeats=min(repeats, 3))
+        if row is not None:
+            rows.append(row)
+        note = "; ".join(filter(None, [note] + more))
     for row in rows:
         row["error_vs_ti"] = branch_error(row["w"], np.asarray(row["coeffs"]), checks)
         row["per_point_ms"] = 1e3 * row["curve_s"] / max(row["points"], 1)

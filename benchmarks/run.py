@@ -1,8 +1,9 @@
 """Run all hbgear benchmarks in one process on this machine and print one table of results.
 
-``python benchmarks/run.py [--quick] [--cache-dir DIR]`` (``--quick``: smaller ranges, fewer
-repeats, a few minutes; the compilation cache is a new empty directory unless ``--cache-dir``
-names one, so the first curve's overhead is measured cold). Each benchmark prints its own details first; the summary table at the
+``python benchmarks/run.py [--quick] [--cache-dir DIR] [--nlvib DIR]`` (``--quick``: smaller
+ranges, fewer repeats, a few minutes; the compilation cache is a new empty directory unless
+``--cache-dir`` names one, so the first curve's overhead is measured cold; ``--nlvib``: a local
+copy of NLvib, whose Duffing curve then runs under GNU Octave in section 2). Each benchmark prints its own details first; the summary table at the
 end sets each measured number next to its goal from the issue. The machine (``nproc``, CPU
 model, load average) and the versions are printed with it: compare numbers from one run only.
 """
@@ -45,19 +46,24 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--cache-dir", default=None,
                         help="compilation cache to use (default: a new empty one, so the first curve is cold)")
+    parser.add_argument("--nlvib", default=None, metavar="DIR",
+                        help="a local copy of NLvib: its Duffing curve under GNU Octave joins section 2 (installs "
+                             "Debian's octave with apt-get if missing)")
     args = parser.parse_args(argv)
     # before hbgear is imported: it reads HBGEAR_CACHE_DIR once
     own_cache = None if args.cache_dir else tempfile.mkdtemp(prefix="hbgear-bench-cache-")
     os.environ["HBGEAR_CACHE_DIR"] = args.cache_dir or own_cache
     os.environ.pop("HBGEAR_NO_CACHE", None)
     try:
-        return _run(args.quick)
+        return _run(args.quick, args.nlvib)
     finally:
         if own_cache:
             shutil.rmtree(own_cache, ignore_errors=True)
 
 
-def _run(q):
+def _run(q, nlvib=None):
+    import bench_bearings
+    import bench_commands
     import bench_duffing_tools
     import bench_frc_vs_ti
     import bench_large_harmonics
@@ -72,7 +78,7 @@ def _run(q):
     frc = bench_frc_vs_ti.run(q)  # first: its compile time must be cold
     print(bench_frc_vs_ti.table(frc), flush=True)
     print("\n## 2. Duffing, hbgear vs other Python HB tools", flush=True)
-    duff_rows, notes = bench_duffing_tools.run(q)
+    duff_rows, notes = bench_duffing_tools.run(q, nlvib=nlvib)
     print(bench_duffing_tools.table(duff_rows))
     for n in notes:
         print("note:", n)
@@ -85,9 +91,16 @@ def _run(q):
     print("\n## 5. studies: local processes vs one process", flush=True)
     study = bench_study.run(q)
     print(bench_study.table(study), flush=True)
-    print("\n## 6. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
+    print("\n## 7. many harmonics: the H = 2048 solve, Newton step vs H", flush=True)
     large = bench_large_harmonics.run(q)
     print(bench_large_harmonics.table(large), flush=True)
+    print("\n## 8. bearings and shafts: 6 and 8 DOF against the 2-DOF cost (H = 32)", flush=True)
+    bear = bench_bearings.run(q)
+    print(bench_bearings.table(bear), flush=True)
+
+    print("\n## 6. the whole commands against same-run references (the speed table)", flush=True)
+    commands = bench_commands.run(q)
+    print(bench_commands.table(commands), flush=True)
 
     t = b["timer"]
     pts = b["points"]
@@ -120,7 +133,7 @@ def _run(q):
         rows.append(("2", f"fastest other: {best_other['tool']}", f"{best_other['per_point_ms']:.2f} ms", ""))
         rows.append(("2", "speed-up hbgear (with Hill) vs fastest other",
                      f"{best_other['per_point_ms'] / (1e3 * (hbd['curve_s'] + hbd['hill_s']) / hbd['points']):.1f}x",
-                     ">= 5x"))
+                     ">= 15x"))
     else:
         rows.append(("2", "other tools", "not run (see note)", ""))
     rows += [
@@ -149,20 +162,45 @@ def _run(q):
     first, warm = large["command"][0], large["command"][-1]
     structured = [c for c in large["cases"] if c["operator"] == "structured"]
     rows += [
-        ("6", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
+        ("7", "H = 2048 solve, whole process, compiled programs from the disk cache", f"{warm['wall_s']:.1f} s",
          "<= 10 s"),
-        ("6", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
-        ("6", "H = 2048 solve, peak resident memory (largest run)",
+        ("7", "the same, first run (compiling into an empty cache)", f"{first['wall_s']:.1f} s", ""),
+        ("7", "H = 2048 solve, peak resident memory (largest run)",
          f"{max(c['rss_mb'] for c in large['command']):.0f} MB", "<= 2 GB"),
-        ("6", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
+        ("7", "Newton step vs H, log-log slope (structured, H = 64 .. 2048)",
          f"{bench_large_harmonics.slope(structured):.2f}", "<= 1.3"),
     ]
+    rows += _command_rows(commands, hbd, others)
+    for coupling, r in bear.items():
+        rows += [("8", f"{coupling} per continuation point, 8 DOF / 2 DOF", f"{r['point_ratio'][8]:.2f}x", "<= 4x"),
+                 ("8", f"{coupling} per continuation point, 6 DOF / 2 DOF", f"{r['point_ratio'][6]:.2f}x", ""),
+                 ("8", f"{coupling} per Hill evaluation, 8 DOF / 2 DOF", f"{r['hill_ratio'][8]:.2f}x", "")]
     print("\n## summary (one run, this machine)")
-    print(f"{'#':2s} {'measure':58s} {'measured':>12s} {'goal':>9s}")
+    print(f"{'#':2s} {'measure':58s} {'measured':>18s} {'goal':>9s}")
     for r in rows:
-        print(f"{r[0]:2s} {r[1]:58s} {r[2]:>12s} {r[3]:>9s}")
+        print(f"{r[0]:2s} {r[1]:58s} {r[2]:>18s} {r[3]:>9s}")
     print(f"\nwall time of the benchmark run: {time.perf_counter() - t0:.0f} s; {machine()}")
     return 0
+
+
+def _command_rows(commands, hbd, others) -> list[tuple]:
+    """The summary rows of section 6 (and the Duffing ratios against every other tool)."""
+    n, lt, hp = commands["nltv"], commands["ltv"], commands["help"]
+    with_hill = 1e3 * (hbd["curve_s"] + hbd["hill_s"]) / hbd["points"]
+    rows = [
+        ("6", f"NLTV frc whole command per point vs TI DOP853 (median of {len(n['wall_all_s'])})",
+         f"{n['speedup_per_point']:.0f}x", ">= 1000x"),
+        ("6", "  whole command / its points; TI per point", f"{n['per_point_ms']:.2f} ms; {n['ti_per_point_s']:.2f} s", ""),
+        ("6", "  Hill on every point / continuation (same run)", f"{n['hill_over_continuation']:.2f}x", "<= 1x"),
+        ("6", "  HB vs TI DTE; Hill vs variational monodromy",
+         f"{100 * n['dte_rel_rms_max']:.3f} %; {n['hill_vs_variational_max']:.0e}", ""),
+        ("6", "LTV frc warm / import jax (median of pairs)", f"{lt['ratio']:.2f}x", "<= 2x"),
+        ("6", "LTV frc first run, empty cache / import jax", f"{lt['cold_ratio']:.2f}x", "<= 5x"),
+        ("6", "hbgear --help / import jax", f"{hp['ratio']:.2f}x", "<= 0.3x"),
+    ]
+    for r in others:
+        rows.append(("6", f"Duffing with Hill vs {r['tool'][:40]}", f"{r['per_point_ms'] / with_hill:.1f}x", ">= 15x"))
+    return rows
 
 
 if __name__ == "__main__":

@@ -19,11 +19,11 @@ first use of its engine turns on JAX's ``jax_enable_x64``.
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version
 
 #: Public name -> module that defines it (imported on first access).
 _EXPORTS = {
     "solve": "api", "frequency_response": "api", "simulate": "api", "stability_map": "api",
+    "natural_frequencies": "api",
     "FrequencyResponse": "api", "SystemFrequencyResponse": "api",
     "study": "studies", "load_study": "studies", "StudyResult": "studies",
     "load_config": "config", "parse_config": "config", "RunConfig": "config",
@@ -43,13 +43,22 @@ _SUBMODULES = ("runtime", "api", "config", "build", "errors", "engine", "gear", 
 
 __all__ = sorted(_EXPORTS) + ["runtime", "__version__"]
 
-try:
-    __version__ = version("hbgear")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0"
+
+
+def _version() -> str:
+    """The installed distribution's version (read on first use: ``importlib.metadata`` is slow to import)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hbgear")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0.0.0"
 
 
 def __getattr__(name: str):
+    if name == "__version__":
+        value = globals()["__version__"] = _version()
+        return value
     if name in _EXPORTS:
         value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
         globals()[name] = value

@@ -20,7 +20,16 @@ from .gear.model import GearPairModel
 from .gear.solve import PeriodicSolution, rpm_to_rad_s
 
 __all__ = ["FrequencyResponse", "PeriodicSolution", "SystemFrequencyResponse", "dataframe", "frc_curve",
-           "frequency_response", "simulate", "solve", "stability_map"]
+           "frequency_response", "natural_frequencies", "simulate", "solve", "stability_map"]
+
+
+def natural_frequencies(model: GearPairModel):
+    """Natural frequencies and modes of the gear pair's linear time-invariant model (mean mesh
+    stiffness, no friction, no damping): a :class:`~hbgear.gear.modes.Modes`
+    (:func:`hbgear.gear.modes.natural_frequencies`)."""
+    from .gear.modes import natural_frequencies as modes
+
+    return modes(model)
 
 
 def dataframe(columns):
@@ -68,9 +77,25 @@ class FrequencyResponse(_gear.GearFrequencyResponse):
 
     def to_dataframe(self):
         """The ``frc.csv`` table as a :class:`pandas.DataFrame` (pandas is not a dependency)."""
-        from .gear.response import COLUMNS
+        return dataframe({k: self.table[k] for k in self.columns})
 
-        return dataframe({k: self.table[k] for k in COLUMNS})
+    def plot_bearing_forces(self, title: str | None = None):
+        """The ``bearing_forces.png`` figure: RMS of the LOA and OLOA bearing forces of pinion and gear
+        against speed (models on bearings)."""
+        from .outputs.plots import bearing_forces_figure
+
+        return bearing_forces_figure(self, title)
+
+    def natural_frequencies(self):
+        """The :class:`~hbgear.gear.modes.Modes` of the curve's model (:func:`natural_frequencies`)."""
+        return natural_frequencies(self.model)
+
+    def plot_campbell(self, orders: int = 10, title: str | None = None):
+        """The ``campbell.png`` figure: mesh orders ``1..orders`` against speed and the natural
+        frequencies of the mean-stiffness model as horizontal lines (their crossings marked)."""
+        from .outputs.plots import campbell_figure
+
+        return campbell_figure(self.natural_frequencies(), self.model, self.speed_rpm_range, orders, title)
 
 
 class SystemFrequencyResponse(_engine.FrequencyResponse):

@@ -25,9 +25,13 @@ from .gear.contact import (
     profile_modification,
 )
 from .gear.geometry import GearPair
+from .gear.kelley_lemanski import ROUGHNESS_CLIP_UIN, MICROINCH_PER_UM
 
-__all__ = ["ToothContact", "build_geometry", "build_model", "build_pair_stiffness", "build_tooth_contact",
+__all__ = ["ToothContact", "build_bearings", "build_geometry", "build_model", "build_shafts", "build_pair_stiffness", "build_tooth_contact",
            "check_config", "friction_law", "model_at_contact_ratio"]
+
+#: Largest Kelley-Lemanski roughness accepted [um]: where the roughness factor's guard starts.
+ROUGHNESS_MAX_UM = ROUGHNESS_CLIP_UIN / MICROINCH_PER_UM
 
 #: A working centre distance may sit this far [m] below the zero-backlash one (printed rounding).
 CENTER_DISTANCE_ROUNDING_M = 0.5e-6
@@ -147,13 +151,19 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
             raise ConfigError("mesh.damping_model", mesh.damping_model, PAIR_DAMPING)
         build_tooth_contact(cfg, geometry=geometry)
         k_min = None
-    if fr.law == "kelley-lemanski" and fr.roughness_um >= 1.27:
-        raise ConfigError("friction.roughness_um", fr.roughness_um, "a roughness below 1.27 um (Kelley-Lemanski)")
+    if fr.law == "kelley-lemanski" and fr.roughness_um > ROUGHNESS_MAX_UM:
+        # C_R = 50/(50 - S) is held at S = 45 uin (C_R = 10) as a guard: above it the law would be
+        # silently clipped, so such a roughness is refused instead
+        raise ConfigError("friction.roughness_um", fr.roughness_um,
+                          f"a roughness <= {ROUGHNESS_MAX_UM:.4g} um for Kelley-Lemanski (C_R = 50/(50 - S) <= 10; "
+                          "it diverges at 1.27 um)")
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
     if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
+    if coupling != "LTI" and fr.lti_friction != "excitation":
+        raise ConfigError("friction.lti_friction", fr.lti_friction, "'excitation' unless friction.model is 'LTI'")
     if coupling == "NLTV" and boundary == "torques":
         raise ConfigError(
             "boundary.output",
@@ -207,6 +217,9 @@ def build_model(cfg, contact_ratio: float | None = None):
         boundary=boundary,
         damping_model=mesh.damping_model,
         contact=contact,
+        lti_friction=fr.lti_friction,
+        bearings=build_bearings(cfg),
+        shafts=build_shafts(cfg),
     )
     return model if k_min is not None else _with_pair_contact(model, build_tooth_contact(cfg, geometry=geometry))
 
@@ -221,6 +234,33 @@ def _with_pair_contact(model, contact: ToothContact):
     s, _ = mesh_period_rule(mesh.phase_breakpoints(model), 64)
     k = mesh.stiffness(model, np.concatenate([s, mesh.phase_breakpoints(model)]))
     return model.replace(mesh=mesh, k_max_N_per_m=float(np.max(k)), k_min_N_per_m=float(np.min(k)))
+
+
+def build_bearings(cfg):
+    """:class:`~hbgear.gear.dofs.Bearings` of ``[bearings]`` (``None`` without the section: rigid)."""
+    from .gear.dofs import Bearings
+
+    b = cfg.bearings
+    if b is None:
+        return None
+    mass_pinion, mass_gear = b.masses(cfg.gear)
+    return Bearings(mass_pinion_kg=mass_pinion, mass_gear_kg=mass_gear,
+                    k_pinion_loa_N_per_m=b.stiffness("pinion", "loa"), k_pinion_oloa_N_per_m=b.stiffness("pinion", "oloa"),
+                    k_gear_loa_N_per_m=b.stiffness("gear", "loa"), k_gear_oloa_N_per_m=b.stiffness("gear", "oloa"),
+                    damping_ratio=b.damping_ratio)
+
+
+def build_shafts(cfg):
+    """:class:`~hbgear.gear.dofs.Shafts` of ``[shafts]`` (``None`` without the section)."""
+    from .gear.dofs import Shafts
+
+    sh = cfg.shafts
+    if sh is None:
+        return None
+    return Shafts(inertia_drive_kgm2=sh.drive_inertia_kgm2, inertia_load_kgm2=sh.load_inertia_kgm2,
+                  stiffness_drive_Nm_per_rad=sh.drive_stiffness_Nm_per_rad,
+                  stiffness_load_Nm_per_rad=sh.load_stiffness_Nm_per_rad,
+                  damping_ratio_drive=sh.damping_ratio, damping_ratio_load=sh.damping_ratio)
 
 
 def model_at_contact_ratio(cfg, contact_ratio: float):

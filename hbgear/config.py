@@ -59,6 +59,7 @@ MAX_COUNT = 10_000_000  # cap on point / cycle / iteration counts (guards agains
 FRICTION_LAWS = ("none", "coulomb", "arctan", "kelley-lemanski")
 FRICTION_FORMULATIONS = ("A", "B")
 FRICTION_MODELS = ("LTI", "LTV", "NLTV")
+LTI_FRICTION = ("excitation", "damping", "both")
 DAMPING_MODELS = ("constant", "proportional")
 BOUNDARY_OUTPUTS = ("torques", "spring", "reaction")
 STIFFNESS_MODELS = ("rectangular", "pair_table", "iso6336", "potential_energy")
@@ -276,7 +277,9 @@ class FrictionConfig:
     (kelley-lemanski only; roughness kept in micrometres as the law's constants use it);
     `regularization_m_per_s` [m/s]: with model NLTV, a discontinuous law (coulomb,
     kelley-lemanski) has ``sgn(Vs)`` replaced by ``(2/pi) atan(Vs / v_reg)`` -- the same in
-    harmonic balance and time integration (results converge as it shrinks).
+    harmonic balance and time integration (results converge as it shrinks); `lti_friction`
+    (model LTI only): "excitation" (nominal friction torques as a Fourier excitation, Eq. 10),
+    "damping" (an energy-equivalent viscous damper at the mesh instead) or "both".
     """
 
     law: str = "coulomb"
@@ -287,6 +290,7 @@ class FrictionConfig:
     viscosity_Pa_s: float = 0.01
     roughness_um: float = 0.5
     regularization_m_per_s: float = 0.005
+    lti_friction: str = "excitation"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -300,6 +304,72 @@ class BoundaryConfig:
     output: str = "spring"
     stiffness_ratio: float = 5e5
     damping_ratio: float = 0.0
+
+
+#: Bearing directions: along (``loa``, ``y``) and across (``oloa``, ``x``) the line of action.
+BEARING_DIRECTIONS = ("loa", "oloa")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BearingsConfig:
+    """Centre translations on bearings (MODEL.md section 10); the section present = 6 DOF.
+
+    **Fields:** `<gear>_stiffness_N_per_m` [N/m] for both directions of the pinion / gear, and
+    `<gear>_<direction>_stiffness_N_per_m` overriding one direction (``loa`` | ``oloa``);
+    `damping_ratio` [-] (each direction ``c = 2 zeta sqrt(k m)``); `mass_pinion_kg`, `mass_gear_kg`
+    [kg] (``None``: a solid disk, ``m = 2 J / r_pitch^2``, see :meth:`masses`). Every direction needs
+    a stiffness (checked here).
+    """
+
+    pinion_stiffness_N_per_m: float | None = None
+    gear_stiffness_N_per_m: float | None = None
+    pinion_loa_stiffness_N_per_m: float | None = None
+    pinion_oloa_stiffness_N_per_m: float | None = None
+    gear_loa_stiffness_N_per_m: float | None = None
+    gear_oloa_stiffness_N_per_m: float | None = None
+    damping_ratio: float = 0.02
+    mass_pinion_kg: float | None = None
+    mass_gear_kg: float | None = None
+
+    def __post_init__(self):
+        for end in ("pinion", "gear"):
+            for direction in BEARING_DIRECTIONS:
+                if self.stiffness(end, direction) is None:
+                    raise ConfigError(f"bearings.{end}_stiffness_MN_per_m", _MISSING,
+                                      f"required: a positive stiffness in MN/m (both directions), unless "
+                                      f"bearings.{end}_loa_stiffness_MN_per_m and bearings.{end}_oloa_stiffness_MN_per_m "
+                                      "are both given")
+
+    def stiffness(self, end: str, direction: str) -> float | None:
+        """The stiffness [N/m] of `end` (pinion | gear) in `direction` (loa | oloa)."""
+        own = getattr(self, f"{end}_{direction}_stiffness_N_per_m")
+        return own if own is not None else getattr(self, f"{end}_stiffness_N_per_m")
+
+    def masses(self, gear: GearConfig) -> tuple[float, float]:
+        """``(m_p, m_g)`` [kg]: given, or solid disks ``m = 2 J / r_pitch^2`` (``r = m_n Z / 2``)."""
+        out = []
+        for end, teeth in (("pinion", gear.teeth_pinion), ("gear", gear.teeth_gear)):
+            given = getattr(self, f"mass_{end}_kg")
+            radius = gear.module_m * teeth / 2
+            out.append(given if given is not None else 2.0 * getattr(gear, f"inertia_{end}_kgm2") / radius**2)
+        return out[0], out[1]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShaftsConfig:
+    """Torsional shafts to a drive and a load inertia (with [bearings]: the 8-DOF model).
+
+    **Fields:** `drive_inertia_kgm2`, `load_inertia_kgm2` [kg m^2] (the input torque acts on the
+    drive inertia, the output boundary on the load inertia); `drive_stiffness_Nm_per_rad`,
+    `load_stiffness_Nm_per_rad` [N m/rad] (drive -- pinion, gear -- load); `damping_ratio` [-]
+    of each shaft's own two-inertia mode.
+    """
+
+    drive_inertia_kgm2: float
+    load_inertia_kgm2: float
+    drive_stiffness_Nm_per_rad: float
+    load_stiffness_Nm_per_rad: float
+    damping_ratio: float = 0.02
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -452,6 +522,8 @@ class RunConfig:
     sweep: SweepConfig = field(default_factory=SweepConfig)
     map: MapConfig = field(default_factory=MapConfig)
     study: StudyConfig = field(default_factory=StudyConfig)
+    bearings: BearingsConfig | None = None
+    shafts: ShaftsConfig | None = None
 
     def __post_init__(self):
         model = self.mesh.stiffness_model
@@ -547,6 +619,12 @@ class RunConfig:
             out[section] = {k: v for k, v in out[section].items() if v is not None}
         if self.study.parameters:
             out["study"] = self.study.to_dict()
+        if self.bearings is not None:
+            out["bearings"] = {(k[:-len("_N_per_m")] + "_MN_per_m" if k.endswith("_N_per_m") else k):
+                               (v * 1e-6 if k.endswith("_N_per_m") else v)
+                               for k, v in dataclasses.asdict(self.bearings).items() if v is not None}
+        if self.shafts is not None:
+            out["shafts"] = dataclasses.asdict(self.shafts)
         return out
 
 
@@ -825,9 +903,7 @@ def _mesh_post(s: _Section, kw: dict[str, Any]) -> dict[str, Any]:
     if model == "pair_table":
         s.get("pair_stiffness_file", _file)  # the "required" message when absent
     if model != "rectangular":
-        if kw.get("damping_model", "proportional") != "proportional":
-            raise ConfigError(s.key("damping_model"), s.raw("damping_model"), PAIR_DAMPING)
-        kw["damping_model"] = "proportional"
+        kw.setdefault("damping_model", "proportional")  # the dynamic commands refuse another one
         return kw
     s.get("k_max_MN_per_m", _STIFFNESS)  # the "required" message when absent
     other = s.exclusive("k_mean_MN_per_m", "k_min_MN_per_m", required=True)
@@ -896,6 +972,7 @@ _friction = _section("friction", FrictionConfig, {
     "viscosity_Pa_s": _Key("viscosity_Pa_s", _POSITIVE),
     "roughness_um": _Key("roughness_um", _num(0.0, lo_open=False)),
     "regularization_m_per_s": _Key("regularization_m_per_s", _POSITIVE),
+    "lti_friction": _Key("lti_friction", _one_of(LTI_FRICTION)),
 })
 _boundary = _section("boundary", BoundaryConfig, {
     "output": _Key("output", _one_of(BOUNDARY_OUTPUTS)),
@@ -923,6 +1000,23 @@ _sweep = _section("sweep", SweepConfig, {
     "period_doubling": _Key("period_doubling", _bool_or_auto),
     "orders": _Key("orders", _int(1, MAX_HARMONICS)),
 })  # start != stop is checked by SweepConfig itself; orders <= H / nu by the frc command
+_BEARING_STIFFNESS = _num(0.0, what="a positive stiffness in MN/m", scale=1e6)
+_bearings = _section("bearings", BearingsConfig, {
+    **{f"{end}{direction}_stiffness_MN_per_m": _Key(f"{end}{direction}_stiffness_N_per_m", _BEARING_STIFFNESS)
+       for end in ("pinion", "gear") for direction in ("", "_loa", "_oloa")},
+    "damping_ratio": _Key("damping_ratio", _RATIO),
+    "mass_pinion_kg": _Key("mass_pinion_kg", _num(0.0, what="a positive mass in kg")),
+    "mass_gear_kg": _Key("mass_gear_kg", _num(0.0, what="a positive mass in kg")),
+})
+_shafts = _section("shafts", ShaftsConfig, {
+    "drive_inertia_kgm2": _Key("drive_inertia_kgm2", _num(0.0, what="a positive inertia in kg m^2"), True),
+    "load_inertia_kgm2": _Key("load_inertia_kgm2", _num(0.0, what="a positive inertia in kg m^2"), True),
+    "drive_stiffness_Nm_per_rad": _Key("drive_stiffness_Nm_per_rad",
+                                       _num(0.0, what="a positive torsional stiffness in N m/rad"), True),
+    "load_stiffness_Nm_per_rad": _Key("load_stiffness_Nm_per_rad",
+                                      _num(0.0, what="a positive torsional stiffness in N m/rad"), True),
+    "damping_ratio": _Key("damping_ratio", _RATIO),
+})
 _map = _section("map", MapConfig, {
     "speed_rpm_start": _Key("speed_rpm_start", _SPEED),
     "speed_rpm_stop": _Key("speed_rpm_stop", _SPEED),
@@ -1044,6 +1138,8 @@ _SECTIONS: dict[str, Callable[[object], Any]] = {
     "sweep": _sweep,
     "map": _map,
     "study": _study,
+    "bearings": _bearings,
+    "shafts": _shafts,
 }
 _REQUIRED = ("gear", "mesh", "load")
 

@@ -38,27 +38,29 @@ TRANSLATIONS = ("y_p", "x_p", "y_g", "x_g")
 
 # ------------------------------------------------------------------------------ the adapter
 
-#: Does the model carry the centre translations (MODEL.md §10)? Not yet: states keep them at
-#: zero (the rigid-bearing limit) and :func:`model_view` checks that. When the multi-DOF model
-#: lands, set this and map the translations in :func:`model_view`.
-MODEL_HAS_BEARINGS = False
+#: Does the model carry the centre translations (MODEL.md §10)? Yes: models built with a
+#: ``[bearings]`` section (``Combo.bearings``) get states whose centres move; the rigid-bearing
+#: models keep them at zero and :func:`model_view` checks that.
+MODEL_HAS_BEARINGS = True
 
 
 def model_view(model, p: dv.Parameters, s, omega, state):
     """The model's physical accelerations and per-pair friction for a physical `state`.
 
-    The one place that knows the model's coordinates (model.py docstring): boundary
-    ``"torques"``: ``q = (delta,)``; ``"spring"``/``"reaction"``: ``q = (delta, u)``,
+    The one place that knows the model's coordinates (model.py and gear/dofs.py docstrings):
+    boundary ``"torques"``: ``q = (delta,)``; ``"spring"``/``"reaction"``: ``q = (delta, u)``,
     ``u = R_bg (theta_g - theta_g,s)``, ``R_bp theta_p = delta + u + u_s``. The state's rigid
     wind-up ``theta_w`` is taken as the static one (``u_s = R_bg theta_w``, so ``u = R_bg phi_g``).
-    Today's model has rigid bearings: the state's translations must be zero.
+    On bearings (:func:`_bearing_view`) the translations follow. A rigid-bearing model's state
+    has its translations at zero.
 
     Returns ``(accelerations, pair)``: name -> array (``"delta_rotation"`` -- ``delta''`` with the
-    bearings rigid -- or ``"phi_p"``, ``"phi_g"``)
+    bearings rigid -- or ``"phi_p"``, ``"phi_g"``; on bearings ``"delta"`` and the translations)
     and the per-pair ``mu``, ``normal``, ``vs`` of ``model.pair_friction``."""
-    if not MODEL_HAS_BEARINGS:
-        for name in TRANSLATIONS:
-            assert not np.any(state[name]) and not np.any(state["d" + name]), "today's model has rigid bearings"
+    if model.bearings is not None:
+        return _bearing_view(model, p, s, omega, state)
+    for name in TRANSLATIONS:
+        assert not np.any(state[name]) and not np.any(state["d" + name]), "a rigid-bearing model's state"
     rbp, rbg = p.geometry.Rbp, p.geometry.Rbg
     delta = rbp * state["phi_p"] - rbg * state["phi_g"]
     ddelta = rbp * state["dphi_p"] - rbg * state["dphi_g"]
@@ -79,6 +81,31 @@ def model_view(model, p: dv.Parameters, s, omega, state):
     return acc, {key: np.asarray(pair[key]) for key in ("mu", "normal", "vs")}
 
 
+def _bearing_view(model, p: dv.Parameters, s, omega, state):
+    """:func:`model_view` on bearings (MODEL.md §10, gear/dofs.py): ``q = (delta[, u], y_p, x_p, y_g,
+    x_g)`` with ``delta = R_bp phi_p - R_bg phi_g + y_p - y_g`` (the state's translations are total)
+    and the translations about the static deflections ``-N/k_py``, ``+N/k_gy``; physically
+    ``a_g = u + u_s``, ``a_p = delta + a_g - y_p + y_g``."""
+    rbp, rbg, br, n = p.geometry.Rbp, p.geometry.Rbg, p.bearings, p.normal_load
+    delta = rbp * state["phi_p"] - rbg * state["phi_g"] + state["y_p"] - state["y_g"]
+    ddelta = rbp * state["dphi_p"] - rbg * state["dphi_g"] + state["dy_p"] - state["dy_g"]
+    moving = [state["y_p"] + n / br.k_py, state["x_p"], state["y_g"] - n / br.k_gy, state["x_g"]]
+    rates = [state["d" + name] for name in TRANSLATIONS]
+    rigid = model.boundary == "torques"
+    q = np.stack([delta] + ([] if rigid else [rbg * state["phi_g"]]) + moving)
+    qd = np.stack([ddelta] + ([] if rigid else [rbg * state["dphi_g"]]) + rates)
+    reaction = state.get("reaction", 0.0) if model.boundary == "reaction" else 0.0
+    force = np.asarray(model.generalized_force(s, q, qd, omega, u_static=rbg * state.get("windup", 0.0),
+                                               reaction=reaction))
+    qdd = np.linalg.solve(np.asarray(model.mass_matrix()), force)
+    first = 1 if rigid else 2
+    acc = {"delta": qdd[0]} | {name: qdd[first + i] for i, name in enumerate(TRANSLATIONS)}
+    if not rigid:
+        acc |= {"phi_g": qdd[1] / rbg, "phi_p": (qdd[0] + qdd[1] - qdd[2] + qdd[4]) / rbp}
+    pair = model.pair_friction(s, q, qd, omega)
+    return acc, {key: np.asarray(pair[key]) for key in ("mu", "normal", "vs")}
+
+
 # ------------------------------------------------------------------------ option combinations
 
 
@@ -91,11 +118,13 @@ class Combo:
     law: str
     damping: str
     ste: bool
+    bearings: bool = False
 
     @property
     def id(self) -> str:
         return "-".join([self.coupling, self.formulation, self.boundary, "backlash" if self.backlash else "linear",
-                         self.law, self.damping, "ste" if self.ste else "no-ste"])
+                         self.law, self.damping, "ste" if self.ste else "no-ste"]
+                        + (["bearings"] if self.bearings else []))
 
 
 def all_combos():
@@ -109,7 +138,9 @@ def all_combos():
                                 yield Combo(coupling, formulation, boundary, backlash, law, damping, ste)
 
 
-COMBOS = tuple(all_combos())
+RIGID_COMBOS = tuple(all_combos())
+#: every combination on rigid bearings (the 2-DOF model) and on bearings (MODEL.md §10)
+COMBOS = RIGID_COMBOS + tuple(replace(c, bearings=True) for c in RIGID_COMBOS)
 
 
 def config_dict(combo: Combo, rng, *, k_pair_MN_per_m=None) -> dict:
@@ -139,8 +170,32 @@ def config_dict(combo: Combo, rng, *, k_pair_MN_per_m=None) -> dict:
                     regularization_m_per_s=rng.uniform(0.001, 0.02))
     boundary = dict(output=combo.boundary, stiffness_ratio=10 ** rng.uniform(3.0, 6.0),
                     damping_ratio=rng.uniform(0.02, 0.3))
-    return dict(gear=gear, mesh=mesh, load=dict(torque_pinion_Nm=rng.uniform(60.0, 400.0)),
-                friction=friction, boundary=boundary)
+    out = dict(gear=gear, mesh=mesh, load=dict(torque_pinion_Nm=rng.uniform(60.0, 400.0)),
+               friction=friction, boundary=boundary)
+    if combo.bearings:  # every direction its own stiffness; the pinion's mass given, the gear's a solid disk
+        out["bearings"] = dict(pinion_loa_stiffness_MN_per_m=rng.uniform(100.0, 900.0),
+                               pinion_oloa_stiffness_MN_per_m=rng.uniform(100.0, 900.0),
+                               gear_stiffness_MN_per_m=rng.uniform(100.0, 900.0),
+                               gear_oloa_stiffness_MN_per_m=rng.uniform(100.0, 900.0),
+                               damping_ratio=rng.uniform(0.005, 0.1), mass_pinion_kg=rng.uniform(0.5, 3.0))
+    return out
+
+
+def derivation_bearings(data: dict) -> dv.Bearings:
+    """The derivation's bearing numbers from a config dict's ``[bearings]`` (INTERFACE.md): each
+    direction's stiffness (its own key, else the gear's), ``c = 2 zeta sqrt(k m)``, a missing mass
+    that of a solid disk ``m = 2 J / r_pitch^2``."""
+    b, gear = data["bearings"], data["gear"]
+    values = {}
+    for end, tag in (("pinion", "p"), ("gear", "g")):
+        radius = gear["module_mm"] * 1e-3 * gear[f"teeth_{end}"] / 2
+        mass = b.get(f"mass_{end}_kg", 2 * gear[f"inertia_{end}_kgm2"] / radius**2)
+        values[f"M_{tag}"] = mass
+        for direction, axis in (("loa", "y"), ("oloa", "x")):
+            k = 1e6 * b.get(f"{end}_{direction}_stiffness_MN_per_m", b.get(f"{end}_stiffness_MN_per_m"))
+            values[f"k_{tag}{axis}"] = k
+            values[f"c_{tag}{axis}"] = 2 * b["damping_ratio"] * math.sqrt(k * mass)
+    return dv.Bearings(**values)
 
 
 @lru_cache(maxsize=None)
@@ -156,7 +211,8 @@ def built(combo: Combo, per_pair: bool = False):
         except ConfigError:  # a contact ratio this tooth pair cannot reach: draw again
             continue
         pp = dv.PerPair(k_pair=lambda xi, k=k1 * 1e6: np.full_like(xi, k)) if per_pair else None
-        return model, dv.parameters(cfg, per_pair=pp), rng
+        bearings = derivation_bearings(data) if combo.bearings else None
+        return model, dv.parameters(cfg, bearings=bearings, per_pair=pp), rng
 
 
 # ----------------------------------------------------------------------------------- states
@@ -168,11 +224,19 @@ REGIMES_LINEAR = ("drive", "tension")
 REGIMES_BACKLASH = ("drive", "tension", "deadzone", "back")
 
 
-def phases(p: dv.Parameters, rng, n: int) -> np.ndarray:
+def phases(p: dv.Parameters, rng, n: int, pitch_margin: float = 1e-6) -> np.ndarray:
     """Random mesh phases at least 1e-6 from the breakpoints (the stiffness jumps, pair exit and
-    the pitch crossings: LTI's d_st' has a Dirac part there, Coulomb's sgn jumps)."""
+    the pitch crossings: LTI's d_st' has a Dirac part there, Coulomb's sgn jumps), and at least
+    `pitch_margin` from the pitch crossings. Near them ``V_s = xi_p Omega_p - xi_g Omega_g`` is a
+    difference of nearly equal terms: at a phase distance ``d`` it keeps ~``eps / d`` of relative
+    rounding, which a smooth law passes on to ``mu``; the OLOA rows of a model on bearings carry the
+    friction force alone (no mesh force to dilute it), so there ``d = 1e-6`` would compare the two
+    routes' rounding of ``V_s`` (~1e-12 seen at ``d ~ 1e-4``), not their equations."""
     s = rng.uniform(0.0, 1.0, 8 * n)
+    g = p.geometry
+    tb = (g.xP - g.xA) / g.pb
     far = np.min(np.abs(s[:, None] - p.breakpoints()[None]), axis=1) > 1e-6
+    far &= np.min(np.abs(s[:, None] - np.array([tb, tb - 1.0])[None]), axis=1) > pitch_margin
     return s[far][:n]
 
 
@@ -222,15 +286,16 @@ def make_state(p: dv.Parameters, s, omega, regime: str, u, translations=None):
     return state
 
 
-def draw(p: dv.Parameters, rng, regime: str, n: int = 24):
-    """``(s, omega, state)`` batches at two random speeds (log-uniform in 200-20000 rpm)."""
+def draw(p: dv.Parameters, rng, regime: str, n: int = 24, moving: bool = False):
+    """``(s, omega, state)`` batches at two random speeds (log-uniform in 200-20000 rpm); the centres
+    `moving` (models on bearings) or at rest."""
     for rpm in 10 ** rng.uniform(math.log10(200.0), math.log10(20000.0), 2):
         omega = rpm * math.pi / 30
-        s = phases(p, rng, n)
-        moving = None
-        if MODEL_HAS_BEARINGS:  # centre displacements of ~1 um and velocities of ~0.1 m/s
-            moving = np.concatenate([rng.normal(0, 1e-6, (4, s.size)), rng.normal(0, 0.1, (4, s.size))])
-        yield s, omega, make_state(p, s, omega, regime, rng.uniform(0.0, 1.0, (5, s.size)), moving)
+        s = phases(p, rng, n, pitch_margin=1e-2 if moving else 1e-6)
+        centres = None
+        if moving:  # centre displacements of ~1 um and velocities of ~0.1 m/s
+            centres = np.concatenate([rng.normal(0, 1e-6, (4, s.size)), rng.normal(0, 0.1, (4, s.size))])
+        yield s, omega, make_state(p, s, omega, regime, rng.uniform(0.0, 1.0, (5, s.size)), centres)
 
 
 def agree(worst, what="relative error"):
@@ -261,7 +326,7 @@ def test_equations_of_motion_drive_flank(combo):
     model, p, _ = built(combo)
     rng = np.random.default_rng(zlib.crc32(combo.id.encode()) + 1)
     friction_seen = False
-    for s, omega, state in draw(p, rng, "drive"):
+    for s, omega, state in draw(p, rng, "drive", moving=combo.bearings):
         worst, mine = compare(model, p, s, omega, state)
         assert np.all(mine["x"] > p.backlash / 2)
         if combo.coupling != "LTI":
@@ -284,7 +349,7 @@ def test_equations_of_motion_large_vibration(combo, regime):
     formulation-B mesh force turns negative. The friction normal load follows MODEL.md §11."""
     model, p, _ = built(combo)
     rng = np.random.default_rng(zlib.crc32((combo.id + regime).encode()))
-    for s, omega, state in draw(p, rng, regime):
+    for s, omega, state in draw(p, rng, regime, moving=combo.bearings):
         mine = dv.evaluate(p, s, omega, state)
         b = p.backlash / 2
         assert {"tension": True, "deadzone": np.all(np.abs(mine["x"]) < b),
@@ -314,15 +379,19 @@ def test_friction_power_is_never_positive_on_the_model(coupling, formulation, ba
                                                        s, rpm, u):
     """MODEL.md §11 on the model itself: the friction power ``-sum_j mu_j N_j V_s,j`` (with the
     model's per-pair values) is never positive, for random states including separation, back
-    flank contact and negative formulation-B mesh force."""
+    flank contact, negative formulation-B mesh force and, on bearings, moving centres."""
     boundaries = ("spring", "reaction") if coupling == "NLTV" else ("torques", "spring", "reaction")
     combo = Combo(coupling, formulation, boundaries[pick % len(boundaries)], backlash, law,
-                  ("constant", "proportional")[pick % 2], bool(pick % 3))
+                  ("constant", "proportional")[pick % 2], bool(pick % 3), bool((pick // 2) % 2))
     model, p, _ = built(combo)
     regimes = REGIMES_BACKLASH if backlash else REGIMES_LINEAR
     omega = rpm * math.pi / 30
     s = np.array([s])
-    state = make_state(p, s, omega, regimes[regime_pick % len(regimes)], np.asarray(u)[:, None])
+    centres = None
+    if combo.bearings:  # the centres' OLOA velocities enter V_s (MODEL.md §10): up to +-1 m/s
+        centres = np.array([[1e-6 * (2 * u[0] - 1)], [0.0], [0.0], [-1e-6 * u[1]], [0.3 * (2 * u[2] - 1)],
+                            [2 * u[3] - 1], [0.2 * u[4]], [1 - 2 * u[1]]])
+    state = make_state(p, s, omega, regimes[regime_pick % len(regimes)], np.asarray(u)[:, None], centres)
     _, pair = model_view(model, p, s, omega, state)
     power = -np.sum(pair["mu"] * pair["normal"] * pair["vs"], axis=0)
     if not power[0] <= 0.0:

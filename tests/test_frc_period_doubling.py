@@ -180,7 +180,7 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     assert hill_calls < exact_calls
     # Hill's slope of the wrong sign (mu + 1 falls with the speed here): stepped out to the segment's end without a sign change, then
     # the whole segment is searched
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0))
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0, None))
     fallback, fallback_calls = locate()
     assert fallback == pytest.approx(exact, rel=2e-7)
     assert fallback_calls > exact_calls
@@ -190,6 +190,6 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     def failing(*a):
         raise ConvergenceError("not converged (test)")
 
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3))
+    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3, None))
     monkeypatch.setattr(frc_command, "_exact_bracket", failing)
     assert locate()[0] == pytest.approx(exact, rel=2e-7)

@@ -381,3 +381,11 @@ def test_batched_read_outs_equal_each_point_summary(overrides, nu):
         for key, value in PeriodicSolution.from_z(model, w, z, hb).summary().items():
             assert batch[key][i] == pytest.approx(value, rel=1e-11, abs=1e-9), (key, i)
     assert len({round(float(v), 6) for v in batch["dte_rms_um"]}) == 3  # three different points
+    # only some read-outs (what frc.csv shows): exactly those values, the others not evaluated
+    some = ("dte_mean_um", "dte_p2p_um", "dynamic_factor")
+    subset = read_outs(model, speeds, zs, hb, keys=some)
+    assert tuple(subset) == some
+    for key in some:
+        np.testing.assert_array_equal(subset[key], batch[key])
+    with pytest.raises(ValueError, match="unknown read-outs"):
+        read_outs(model, speeds, zs, hb, keys=("dte_rms_um", "efficiency"))

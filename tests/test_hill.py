@@ -257,3 +257,88 @@ def test_snapped_sets_only_self_conjugate_exponents_on_half_integers():
     snapped = hill._snapped(mu)
     np.testing.assert_array_equal(snapped.imag, [0.5, -0.5, 0.0, 0.2, 0.50002])
     np.testing.assert_array_equal(snapped.real, mu.real)
+
+
+# ----------------------------------------------------------------------------- along a branch
+
+
+def nltv_branch(rpm_from, rpm_to, samples=256):
+    from hbgear.engine.response import frequency_response
+    from hbgear.gear.solve import start_guess
+
+    model = gear("friction.model='NLTV'", "friction.law='arctan'")
+    hb, system = HarmonicBalance(model.ndof, 32, 1, samples), GearSystem(model)
+    curve = frequency_response(system, (rpm_to_rad_s(rpm_from), rpm_to_rad_s(rpm_to)), harmonics=32, samples=samples,
+                               z0=start_guess(model, hb, system), stability=False, period_doubling=False)
+    assert curve.success
+    return hb, system, curve.branch.z, curve.branch.p
+
+
+@pytest.mark.parametrize("rpm_from, rpm_to, real_negative", [
+    (3290.0, 3360.0, 0),  # the soft mode's real pair merging into a complex one (see the 3326 rpm test)
+    (5230.0, 5420.0, 2),  # two real negative multipliers between the two period doublings near 5300 rpm
+])
+def test_seeded_along_a_branch_equals_the_dense_and_the_unseeded_way(rpm_from, rpm_to, real_negative):
+    """Every point of a branch seeded from the one before (hill_exponents_along) against the
+    dense eigen-decomposition and the unseeded refinement at every point, through a merger of
+    real multipliers and through a period-doubling tongue; most points must be settled seeded
+    (the others go to the unseeded way, at the splits and mergers)."""
+    hb, system, zs, ps = nltv_branch(rpm_from, rpm_to)
+    follower = floquet.hill_follower(hb, system)
+    seeded = floquet.hill_exponents_along(hb, zs[:10], ps[:10], system, follower)
+    seeded += floquet.hill_exponents_along(hb, zs[10:], ps[10:], system, follower)  # the chain carries on
+    dense = floquet.hill_exponents_batch(hb, zs, ps, system, method="dense")
+    unseeded = floquet.hill_exponents_batch(hb, zs, ps, system)
+    assert follower.seeded + follower.unseeded == len(ps) and follower.seeded >= 0.9 * len(ps)
+    for (lam, mult), (lam_d, mult_d), (_, mult_u) in zip(seeded, dense, unseeded):
+        assert max_pair_distance(mult, mult_d) < 1e-10
+        assert max_pair_distance(mult, mult_u) < 1e-10
+        assert max_pair_distance(lam, lam_d) < 1e-8
+        assert np.all(np.diff(np.abs(mult)) <= 0)
+    negative = [int(np.sum((np.abs(m.imag) < 1e-12) & (m.real < 0))) for _, m in seeded]
+    assert max(negative) == real_negative
+    if real_negative:  # real multipliers come out real on the seeded way too
+        assert negative == [int(np.sum((np.abs(m.imag) < 1e-12) & (m.real < 0))) for _, m in dense]
+
+
+def test_along_a_branch_with_a_free_mean_coordinate_keeps_the_unseeded_selection():
+    """Reaction boundary (H = 24): the split Jordan pair at 0 lies within the trivial tolerance
+    at some points and not at others (13259 rpm: one half at -4.8e-5); every point must keep
+    as many exponents as the dense selection, with its values."""
+    from hbgear.engine.response import frequency_response
+    from hbgear.gear.solve import start_guess
+
+    model = gear("friction.model='NLTV'", "friction.law='arctan'", "boundary.output='reaction'")
+    hb, system = HarmonicBalance(model.ndof, 24, 1, 256), GearSystem(model)
+    curve = frequency_response(system, (rpm_to_rad_s(13240.0), rpm_to_rad_s(13330.0)), harmonics=24, samples=256,
+                               z0=start_guess(model, hb, system), stability=False, period_doubling=False)
+    zs, ps = curve.branch.z, curve.branch.p
+    along = floquet.hill_exponents_along(hb, zs, ps, system)
+    dense = floquet.hill_exponents_batch(hb, zs, ps, system, method="dense")
+    assert len({len(m) for _, m in dense}) == 2  # the number of trivial exponents dropped changes
+    for (_, mult), (_, mult_d) in zip(along, dense):
+        assert max_pair_distance(mult, mult_d) < 1e-8
+
+
+def test_follower_starts_unseeded_and_after_a_reset():
+    hb, system, zs, ps = nltv_branch(5230.0, 5300.0)
+    pencils = np.concatenate(hill.hill_pencils(hb, zs[:6], ps[:6], system)[0])
+    follower = floquet.hill_follower(hb, system)
+    first = [follower(abc) for abc in pencils[:3]]
+    assert (follower.seeded, follower.unseeded) == (2, 1)
+    follower.reset()
+    again = follower(pencils[3])
+    assert (follower.seeded, follower.unseeded) == (2, 2)
+    ref = hill.central_exponents(pencils[:4, 0], pencils[:4, 1], pencils[:4, 2], hb.ndof, 32)
+    for mu, mu_ref in zip(first + [again], ref):
+        assert max_pair_distance(np.exp(2 * np.pi * mu), np.exp(2 * np.pi * mu_ref)) < 1e-10
+
+
+def test_multiplier_order_is_canonical():
+    """Decreasing modulus, the two of a complex pair (equal moduli) with Im > 0 first, whatever
+    order the exponents come in."""
+    mu = np.array([-0.01 - 0.2j, -0.03 + 0.4j, -0.01 + 0.2j, -0.02 + 0.0j])
+    lam, mult = floquet._exponents_and_multipliers(mu, 2.0)
+    assert np.all(np.diff(np.abs(mult)) <= 0)
+    assert mult[0].imag > 0 and mult[1] == np.conj(mult[0])
+    np.testing.assert_allclose(lam, 2.0 * np.log(mult) / (2 * np.pi), atol=1e-12)

@@ -267,3 +267,17 @@ def test_kelley_lemanski_nltv_b_harmonic_balance_matches_time_integration():
     assert hb["mean_power_loss_W"] == pytest.approx(ti["mean_power_loss_W"], rel=2e-5)
     for s, limit in ((hb, 3e-7), (ti, 3e-8)):
         assert abs(s["mean_power_loss_W"] - s["mean_friction_loss_W"] - s["mean_mesh_power_W"]) < limit * s["mean_power_loss_W"]
+
+
+@pytest.mark.parametrize("roughness", [1.15, 1.2, 1.26])
+def test_a_roughness_the_law_would_clip_is_refused(roughness):
+    """Above 45 uin (1.143 um) the roughness factor is held at C_R = 10 as a guard: a config
+    asking for more would get a silently clipped law, so it is bad input (one line, the key)."""
+    from hbgear.build import check_config
+    from hbgear.config import load_config
+    from hbgear.errors import ConfigError
+
+    cfg = load_config(EXAMPLE, ["friction.law='kelley-lemanski'", f"friction.roughness_um={roughness}"])
+    with pytest.raises(ConfigError, match=r"friction.roughness_um = .*<= 1.143 um"):
+        check_config(cfg)
+    check_config(load_config(EXAMPLE, ["friction.law='kelley-lemanski'", "friction.roughness_um=1.14"]))

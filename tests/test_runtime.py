@@ -63,3 +63,13 @@ def test_no_cache_setting_leaves_the_cache_off(tmp_path):
     out = _run("import hbgear; print(hbgear.runtime.configure(threads=False))", HBGEAR_NO_CACHE="1",
                XDG_CACHE_HOME=str(tmp_path))
     assert "'cache_dir': None" in out and not (tmp_path / "hbgear").exists()
+
+
+def test_keep_freed_memory_is_opt_in_and_can_be_declined():
+    out = _run("""
+        import hbgear
+        print(hbgear.runtime.configure(threads=False, cache=False))
+    """)
+    assert "'keep_freed_memory': True" in out
+    out = _run("import hbgear; print(hbgear.runtime.configure(threads=False, cache=False))", HBGEAR_MALLOC="default")
+    assert "'keep_freed_memory': False" in out

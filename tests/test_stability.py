@@ -192,6 +192,40 @@ def test_variational_state_synthesis_equals_the_solution_and_a_state_function():
     np.testing.assert_allclose(from_solution, from_function, rtol=1e-9, atol=1e-11 * np.abs(from_function).max())
 
 
+def test_variational_monodromy_batch_equals_the_members_alone():
+    """A batch of three solutions (padded to four members) integrated together: each member's
+    monodromy and most negative real multiplier as when integrated alone (NLTV arctan, soft
+    spring, around the 5270 rpm crossing); members with other breakpoints are refused."""
+    from hbgear.engine import bifurcation
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.monodromy import monodromy_variational, state_synthesis
+    from hbgear.gear.solve import solve_periodic
+    from hbgear.gear.system import GearSystem
+
+    m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
+    omegas = np.array([5250.0, 5270.0, 5290.0]) / RPM
+    sols = [solve_periodic(m, w, harmonics=16, samples=128) for w in omegas]
+    system = GearSystem(m)
+    batch = monodromy_variational(system, omegas, state_synthesis(np.stack([s.coefficients for s in sols]), 16,
+                                                                  np.array([s.base_frequency for s in sols])))
+    assert batch.shape == (3, 4, 4)
+    for phi, sol, w in zip(batch, sols, omegas):
+        alone = monodromy_variational(system, w, state_synthesis(sol.coefficients, 16, sol.base_frequency))
+        np.testing.assert_allclose(phi, alone, rtol=1e-8, atol=1e-8 * np.abs(alone).max())
+    hb = HarmonicBalance(m.ndof, 16, 1, 128)
+    together = bifurcation.exact_negative_multipliers(system, hb, [s.z for s in sols], omegas)
+    for value, sol, w in zip(together, sols, omegas):
+        assert value == pytest.approx(bifurcation.exact_negative_multiplier(system, hb, sol.z, w), abs=1e-8)
+    other = build_model(config("friction.model='NLTV'", "friction.law='arctan'", "gear.contact_ratio=1.5"))
+
+    class TwoGeometries(GearSystem):
+        def breakpoints(self, p, xp=np):
+            return (other if p > omegas[0] else m).breakpoint_candidates(xp)
+
+    with pytest.raises(ValueError, match="same breakpoints"):
+        monodromy_variational(TwoGeometries(m), omegas[:2], lambda tau: (np.zeros((2, 2)), np.zeros((2, 2))))
+
+
 # ----------------------------------------------------------------------------- tongues
 
 

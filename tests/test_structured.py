@@ -50,7 +50,10 @@ def solution_multipliers(solution):
 
 
 def gear(case):
-    return build_model(load_config(EXAMPLE, GEAR_CASES[case]))
+    model = build_model(load_config(EXAMPLE, GEAR_CASES[case]))
+    # backlash compared with signed friction loads: no jumps where a flank closes (the structured
+    # path does not carry them: test_structured_refuses_event_jumps_and_auto_falls_back)
+    return model.replace(normal_loads="signed") if case == "backlash" else model
 
 
 def pair(ndof, harmonics, samples, nu=1):
@@ -155,6 +158,19 @@ def _same_solution(dense, system, p, ours, theirs):
     np.testing.assert_allclose(ours[:block], theirs[:block], rtol=0, atol=1e-10 * np.max(np.abs(theirs[:block])))
     _, jac = dense.residual_and_linearization(jnp.asarray(theirs), p, system)
     assert np.max(np.abs(np.asarray(jac) @ (ours - theirs))) <= 1e-10
+
+
+def test_structured_refuses_event_jumps_and_auto_falls_back(monkeypatch):
+    """Backlash with compressive friction loads declares event functions (the loads jump where a
+    flank closes): operator='structured' refuses with a message naming the way out, and 'auto'
+    takes the dense path even where its size rule would choose the structured one."""
+    model = build_model(load_config(EXAMPLE, GEAR_CASES["backlash"]))
+    system = GearSystem(model)
+    with pytest.raises(ValueError, match="operator='dense' or 'auto'"):
+        HarmonicBalance(model.ndof, 8, 1, 40, operator="structured").prepare(system)
+    monkeypatch.setattr(hb_module, "STRUCTURED_MIN_SIZE", 1, raising=False)
+    auto = HarmonicBalance(model.ndof, 8, 1, 40, operator="auto")
+    assert auto.prepare(system).structured is None
 
 
 @pytest.mark.parametrize("samples", [64, 20])

@@ -9,7 +9,9 @@ overrides -> :func:`hbgear.build.check_config` (the physics checks) -> the comma
 `validate(config, args)` -> create the output directory (only now, so a bad input never leaves
 anything behind) -> :func:`hbgear.runtime.configure` -> `run(config, args, out_dir)`. Everything
 before `run` imports neither JAX nor matplotlib, so ``--help``, ``--version`` and every bad input
-answer at once; command modules import their heavy dependencies inside `run`.
+answer at once; command modules import their heavy dependencies inside `run`, and this module
+imports the config, the physics checks and the outputs only once the arguments are parsed (the
+front door, ``hbgear --help``, loads no numpy).
 
 Exit status: 0 success (or what `run` returns); 2 bad input -- a
 :class:`~hbgear.errors.ConfigError` or a usage error -- with exactly one line
@@ -29,13 +31,12 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
-from .. import runtime
-from ..build import check_config
-from ..config import RunConfig, load_config
 from ..errors import ConfigError, ConvergenceError
-from ..outputs.io import prepare_out_dir
+
+if TYPE_CHECKING:
+    from ..config import RunConfig
 
 __all__ = [
     "COMMANDS",
@@ -233,6 +234,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help(sys.stderr)
             return EXIT_BAD_INPUT
         command = COMMANDS[args.command]
+        from .. import runtime
+        from ..build import check_config
+        from ..config import load_config
+        from ..outputs.io import prepare_out_dir
+
         config = load_config(args.config, args.overrides or ())
         if command.dynamic_model:
             check_config(config)

@@ -12,10 +12,15 @@ Load -> build -> :func:`hbgear.frequency_response` -> write, into the output dir
 - ``frc.json``: status and message, ``H`` and how it was chosen, folds, stability (method,
   unstable points, the exact scan's unstable zones), period doublings, continuation settings,
   the mesh orders, the ISO 6336-1 resonance speed ``n_E1`` and its ranges, the points of
-  ``floquet.png``, timings, the config;
-- ``frc.png``: the curve (:func:`hbgear.outputs.plots.frc_figure`); ``orders.png``: order tracking
-  (order lines and the speed x order map); ``dynamic_factor.png``: ``max F_mesh / N`` with ``n_E1``
-  and its ranges; ``floquet.png``: the multipliers of a few selected points on the unit circle
+  ``floquet.png``, timings (``outputs``: the CSV files; ``total``: up to this file), the config;
+- ``modes.json`` and ``campbell.png``: the natural frequencies of the mean-stiffness model
+  (:func:`hbgear.natural_frequencies`) and the Campbell diagram (mesh orders against speed);
+- on bearings, ``frc.csv`` and ``orders.csv`` gain the bearing forces and ``bearing_forces.png``
+  shows their RMS (LOA, OLOA) against speed;
+- the figures, drawn last, once the numbers are on disk (matplotlib is imported only then):
+  ``frc.png`` the curve (:func:`hbgear.outputs.plots.frc_figure`); ``orders.png`` order tracking
+  (order lines and the speed x order map); ``dynamic_factor.png`` ``max F_mesh / N`` with ``n_E1``
+  and its ranges; ``floquet.png`` the multipliers of a few selected points on the unit circle
   (not with ``--no-stability``).
 
 If the continuation stops before the stop speed, the curve so far is written (with the status in
@@ -119,7 +124,8 @@ def _summary(curve, config, args, method_options, timings, orders=None) -> dict:
         "floquet_points": [] if stab is None else curve.floquet_points(),
         "continuation": method_options | {"method": "pseudo-arclength", "parameter": "pinion speed [rad/s]"},
         "model": {"coupling": model.coupling, "formulation": model.formulation, "boundary": model.boundary,
-                  "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof},
+                  "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof,
+                  "coordinates": list(model.layout.coordinates)},
         "timings_s": timings, "config": config.to_dict(),
     }
 
@@ -156,7 +162,7 @@ def run(config, args, out_dir) -> int:
     from ..api import frc_curve
     from ..engine.continuation import sweep_method
     from ..errors import ConvergenceError
-    from ..gear.response import COLUMNS, FLOQUET_COLUMNS
+    from ..gear.response import FLOQUET_COLUMNS
     from ..gear.solve import rpm_to_rad_s
     from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
 
@@ -166,24 +172,32 @@ def run(config, args, out_dir) -> int:
     curve = frc_curve(config, stability=not args.no_stability, period_doubling=flag,
                       progress=False if args.no_progress else None)
     t_done = time.perf_counter()
-    write_csv_atomic(out_dir / "frc.csv", COLUMNS, [[row[c] for c in COLUMNS] for row in curve.rows()])
+    write_csv_atomic(out_dir / "frc.csv", curve.columns, [[row[c] for c in curve.columns] for row in curve.rows()])
     if curve.response.stability is not None:
         write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, curve.floquet_rows())
-    save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
     count, order_rule = _order_count(config, curve)
     orders = curve.mesh_orders(count)
     write_csv_atomic(out_dir / "orders.csv", *curve.order_rows(orders))
-    save_figure_atomic(curve.plot_orders(orders), out_dir / "orders.png", dpi=120)
-    save_figure_atomic(curve.plot_dynamic_factor(), out_dir / "dynamic_factor.png", dpi=120)
-    if curve.response.stability is not None:
-        save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
-    t_out = time.perf_counter()
     method = sweep_method(rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop),
                           None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm))
+    t_out = time.perf_counter()
     timings = dict(curve.timings_s) | {"per_point_ms": 1e3 * curve.timings_s["continuation"] / max(curve.points - 1, 1),
-                                       "outputs": t_out - t_done, "total": time.perf_counter() - t0}
+                                       "outputs": t_out - t_done, "total": t_out - t0}
     write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings,
                                                      {"mesh_orders": orders, "rule": order_rule}))
+    modes = curve.natural_frequencies()
+    write_json_atomic(out_dir / "modes.json", {"model": "mean mesh stiffness, no friction, undamped",
+                                               "modes": modes.records(float(curve.model.teeth_pinion), (1, 2, 3))})
+    save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
+    save_figure_atomic(curve.plot_orders(orders), out_dir / "orders.png", dpi=120)
+    save_figure_atomic(curve.plot_dynamic_factor(), out_dir / "dynamic_factor.png", dpi=120)
+    save_figure_atomic(curve.plot_campbell(max(int(orders.max()), 1)), out_dir / "campbell.png", dpi=120)
+    if curve.model.bearings is not None:
+        from ..outputs.plots import bearing_forces_figure
+
+        save_figure_atomic(bearing_forces_figure(curve, modes=modes), out_dir / "bearing_forces.png", dpi=120)
+    if curve.response.stability is not None:
+        save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
     if not curve.success:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "

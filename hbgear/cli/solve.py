@@ -48,8 +48,11 @@ def run(config, args, out_dir) -> int:
 
     solution = solve_config(config, build_model(config), args.speed)
     record = solution_record(solution) | {"config": config.to_dict()}
-    write_csv_atomic(out_dir / "harmonics.csv", ["mesh_order", "dte_amplitude_um", "dte_phase_deg"],
-                     solution.harmonic_table())
+    if solution.model.bearings is None:
+        write_csv_atomic(out_dir / "harmonics.csv", ["mesh_order", "dte_amplitude_um", "dte_phase_deg"],
+                         solution.harmonic_table())
+    else:  # the bearing forces' amplitudes per order as further columns
+        write_csv_atomic(out_dir / "harmonics.csv", *solution.bearing_harmonic_table())
     write_csv_atomic(out_dir / "waveform.csv", waveform_header(PAIR_SLOTS),
                      waveform_rows(solution, max(512, 8 * solution.harmonics), PAIR_SLOTS))
     write_json_atomic(out_dir / "solution.json", record)

@@ -17,10 +17,7 @@ import math
 
 
 from . import Command, positive_float, register
-from ..build import build_geometry, build_tooth_contact
 from ..errors import ConfigError
-from ..gear.contact import loaded_te_table
-from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
 
 HARRIS_HEADER = ["torque_pinion_Nm", "loaded_te_p2p_um"]
 
@@ -46,6 +43,8 @@ def torques_of(config, args) -> list[float]:
 
 def contacts_of(config, torques):
     """One :class:`~hbgear.build.ToothContact` per torque, on one geometry."""
+    from ..build import build_geometry, build_tooth_contact
+
     geometry = build_geometry(config.gear)
     return [build_tooth_contact(config, torque, geometry) for torque in torques]
 
@@ -130,6 +129,8 @@ def _title(config, pair) -> str:
 
 
 def run(config, args, out_dir) -> int:
+    from ..gear.contact import loaded_te_table
+    from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
     from ..outputs.plots import harris_figure, static_te_figure
 
     torques = torques_of(config, args)

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .continuation import PseudoArclength, Status, continuation, illinois, sweep_method
-from .floquet import hill_multipliers, most_negative_real
+from .floquet import hill_exponents_along, hill_follower, most_negative_real
 from .hb import HarmonicBalance, residual_functions
 from .monodromy import monodromy_variational, multipliers_linear, state_synthesis
 
@@ -37,11 +37,13 @@ __all__ = [
     "amplitude_residuals",
     "embed_subharmonic",
     "exact_negative_multiplier",
+    "exact_negative_multipliers",
     "follow_period_doubled",
     "half_order_indices",
     "half_order_mode",
     "half_order_share",
     "locate_period_doubling",
+    "locate_period_doublings",
 ]
 
 
@@ -148,33 +150,63 @@ class PeriodDoublingPoint(NamedTuple):
     bracket: tuple
 
 
+def exact_negative_multipliers(system, hb: HarmonicBalance, zs, ps) -> np.ndarray:
+    """:func:`exact_negative_multiplier` at the points ``(zs[i], ps[i])``: the ones where the
+    system's linearization holds by exact monodromy, the others by one batched integration of
+    their variational equations (:func:`~hbgear.engine.monodromy.monodromy_variational`)."""
+    if hb.nu != 1:
+        raise ValueError("exact_negative_multiplier needs a nu = 1 solution")
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    out = np.full(len(ps), np.nan)
+    linear = system.linearization()
+    rest = []
+    for i, (z, p) in enumerate(zip(zs, ps)):
+        if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):  # (z unused if linear)
+            out[i] = most_negative_real(multipliers_linear(linear, float(p)))
+        else:
+            rest.append(i)
+    if rest:
+        coefficients = np.stack([hb.decode(system, zs[i])[0] for i in rest])
+        base = np.array([float(hb.base_frequency(system, ps[i])) for i in rest])
+        state = state_synthesis(coefficients, hb.harmonics, base)
+        phi = monodromy_variational(system, ps[rest], state, 1, rtol=VARIATIONAL_RTOL)
+        out[rest] = [most_negative_real(m) for m in np.linalg.eigvals(phi)]
+    return out
+
+
 def exact_negative_multiplier(system, hb: HarmonicBalance, z, p) -> float:
     """The most negative real Floquet multiplier per excitation period of the ``nu = 1`` solution
     `z` at `p` (``nan`` if none): exact monodromy where the system's linearization holds along it,
     the variational equations otherwise. Hill's method is not used here: with a few harmonics
     its selection of a real negative multiplier (exponents at half-integer harmonic centres) is
     not reliable enough to bracket the crossing."""
-    if hb.nu != 1:
-        raise ValueError("exact_negative_multiplier needs a nu = 1 solution")
-    linear = system.linearization()
-    if linear is not None and (linear is system or system.in_linear_regime(hb, z, p)):
-        return most_negative_real(multipliers_linear(linear, float(p)))
-    coefficients, _ = hb.decode(system, z)
-    state = state_synthesis(coefficients, hb.harmonics, float(hb.base_frequency(system, p)))
-    return most_negative_real(np.linalg.eigvals(monodromy_variational(system, float(p), state, 1)))
+    return float(exact_negative_multipliers(system, hb, [np.asarray(z)], [p])[0])
 
+
+#: ``rtol`` of the variational monodromy (DOP853) of the exact multipliers (per member of a batch).
+VARIATIONAL_RTOL = 1e-10
 
 #: Smallest first step (relative) from Hill's crossing towards the exact one (:func:`_exact_bracket`).
 HILL_MIN_STEP = 1e-6
 
+#: Hill's crossing is located to this (relative) before the exact multipliers are asked (each
+#: Hill evaluation, seeded from the last, is ~100x cheaper than a variational monodromy).
+HILL_TOLERANCE = 1e-9
 
-def _exact_bracket(g, w0, slope, pa, pb):
+#: Half-width of the bracket around the predicted exact crossing, in units of the tolerance (on
+#: the NLTV pair, H = 32, N = 1024, the predictions were within 1.2e-10 relative of the crossings
+#: the exact search finds, the bracket ends 1e-8 relative away).
+PREDICTED_HALF_WIDTH = 0.1
+
+
+def _exact_bracket(g, w0, slope, pa, pb, g0=None):
     """``(a, g(a)..., b, g(b)...)`` with a sign change of the exact ``g``, from Hill's crossing
-    `w0`: the next point is the exact crossing predicted with Hill's `slope`, overshot by half
-    (at least ``HILL_MIN_STEP`` away), then steps four times longer until the sign changes;
-    ``None`` at the end of the segment ``[pa, pb]`` without one."""
+    `w0` (its exact ``g``, ``(value, data)``, if known): the next point is the exact crossing
+    predicted with Hill's `slope`, overshot by half (at least ``HILL_MIN_STEP`` away), then steps
+    four times longer until the sign changes; ``None`` at the end of the segment ``[pa, pb]``
+    without one."""
     low, high = min(pa, pb), max(pa, pb)
-    g0, d0 = g(w0)
+    g0, d0 = g(w0) if g0 is None else g0
     if g0 == 0:
         return w0, g0, d0, w0, g0, d0
     step = -1.5 * g0 / slope if slope != 0 and np.isfinite(slope) else 0.0
@@ -190,69 +222,172 @@ def _exact_bracket(g, w0, slope, pa, pb):
 
 
 def _hill_crossing(system, hb, solve, pa, pb, tolerance, max_steps):
-    """``(p, slope)``: the -1 crossing of Hill's most negative real multiplier between `pa` and
-    `pb` (to `tolerance` relative) and the slope of its ``mu + 1`` over the segment, or ``None``
-    when Hill's multipliers do not bracket a crossing there (or fail)."""
+    """``(p, slope, z)``: the -1 crossing of Hill's most negative real multiplier between `pa`
+    and `pb` (to `tolerance` relative), the slope of its ``mu + 1`` there and the solution at
+    ``p``, or ``None`` when Hill's multipliers do not bracket a crossing there (or fail). Each
+    evaluation is seeded from the one before (:func:`~hbgear.engine.floquet.hill_exponents_along`,
+    without the linear predictor: the iterates are not evenly spaced); the slope is the secant of
+    the closest two evaluations on either side at least ``100 tolerance`` apart."""
+    follower = hill_follower(hb, system, predict=False)
+    seen = []
 
     def g(w):
-        mu = most_negative_real(hill_multipliers(hb, solve(w), w, system))
-        return (mu + 1.0 if np.isfinite(mu) else 1.0), None
+        z = solve(w)
+        (_, mult), = hill_exponents_along(hb, z[None], [w], system, follower)
+        mu = most_negative_real(mult)
+        value = mu + 1.0 if np.isfinite(mu) else 1.0
+        seen.append((w, value))
+        return value, z
 
     try:
-        (ga, _), (gb, _) = g(pa), g(pb)
+        (ga, za), (gb, _) = g(pa), g(pb)
         if ga * gb > 0:
             return None
-        (w, _, _), _ = illinois(g, pa, ga, pb, gb, (pa, None, ga), tolerance, max_steps)
+        (w, z, _), _ = illinois(g, pa, ga, pb, gb, (pa, za, ga), tolerance, max_steps)
     except Exception:  # noqa: BLE001 -- Hill only starts the search; the exact multipliers decide
         return None
-    return w, (gb - ga) / (pb - pa)
+    below = [(x, v) for x, v in seen if (v < 0) == (ga < 0)]
+    above = [(x, v) for x, v in seen if (v < 0) != (ga < 0)]
+    pairs = [(abs(a - b), a, va, b, vb) for a, va in below for b, vb in above if abs(a - b) >= 100 * tolerance * abs(w)]
+    _, a, va, b, vb = min(pairs) if pairs else (0.0, pa, ga, pb, gb)
+    return w, (vb - va) / (b - a), z
 
 
-def locate_period_doubling(system, hb: HarmonicBalance, solve: Callable, pa: float, za, pb: float, zb, *,
-                           tolerance: float = 1e-7, max_steps: int = 40):
-    """The -1 crossing between branch points ``(pa, za)`` and ``(pb, zb)`` (``nu = 1`` unknowns of `hb`).
+def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segments, *, tolerance: float = 1e-7,
+                            max_steps: int = 40) -> list:
+    """The -1 crossings between pairs of branch points, ``segments``: ``(pa, za, pb, zb)`` each
+    (``nu = 1`` unknowns of `hb`).
 
     Illinois regula falsi on ``mu + 1`` (:func:`exact_negative_multiplier`) in the parameter, to
     `tolerance` relative; `solve(p, z0) -> z` converges a ``nu = 1`` solution at `p` from `z0`
     (started from the straight line between the two points, so it stays on this branch even where
-    the curve is multivalued). Where the multiplier needs the variational equations (~0.15 s an
-    evaluation for the gear pair) the crossing of Hill's multipliers (~10 ms) is located first;
-    the exact multiplier there and Hill's slope give the next point, stepped out until the exact
-    multipliers change sign; they then locate the crossing. Hill's crossing is off the exact one
-    by its truncation and sampling error (2e-6 relative at H = 32, N = 1024 on the NLTV gear pair;
-    4e-5 at N = 256). Without that bracket the whole segment is searched with the exact multipliers.
+    the curve is multivalued; for a linear system, whose multipliers do not depend on the solution,
+    only at the crossing found). Where the multiplier needs the variational equations (a batch of
+    them costs about one) the crossing of Hill's multipliers (cheap) is located first, to
+    :data:`HILL_TOLERANCE`; the exact multipliers there (one batch for all segments) and Hill's
+    slope predict each exact crossing, and the exact multipliers on either side of it,
+    :data:`PREDICTED_HALF_WIDTH` tolerances away (a second batch), confirm it when they differ in
+    sign: the crossing is then bracketed to the tolerance. Otherwise that segment is searched
+    from Hill's crossing, stepped out until the exact multipliers change sign, then by Illinois;
+    without Hill's crossing, over the whole segment. Hill's crossing is off the exact one by its
+    truncation and sampling error (2e-6 relative at H = 32, N = 1024 on the NLTV gear pair).
+
+    **Returns:** one ``(PeriodDoublingPoint, None)`` or ``(None, reason)`` per segment (reason:
+    the exact multipliers do not confirm a crossing between the points, or what failed).
+    """
+    segments = [(float(pa), np.asarray(za, dtype=float), float(pb), np.asarray(zb, dtype=float))
+                for pa, za, pb, zb in segments]
+
+    def on_segment(k):
+        pa, za, pb, zb = segments[k]
+
+        def solve_on_segment(w):
+            t = 0.0 if pb == pa else (w - pa) / (pb - pa)
+            return solve(w, (1 - t) * za + t * zb)
+
+        return solve_on_segment
+
+    out: list = [None] * len(segments)
+    hills: dict = {}
+    if system.linearization() is None:
+        for k, (pa, _, pb, _) in enumerate(segments):
+            hill = _hill_crossing(system, hb, on_segment(k), pa, pb, HILL_TOLERANCE, max_steps)
+            if hill is not None:
+                w, slope, z = hill
+                try:
+                    hills[k] = (w, slope, on_segment(k)(w) if z is None else z)
+                except Exception:  # noqa: BLE001 -- a solve that fails at Hill's crossing: the whole segment
+                    pass
+    exact_at_hill: dict = {}
+    if hills:
+        order = list(hills)
+        try:
+            values = exact_negative_multipliers(system, hb, [hills[k][2] for k in order], [hills[k][0] for k in order])
+        except Exception:  # noqa: BLE001 -- each segment is then searched on its own
+            values = None
+        if values is not None:
+            exact_at_hill = {k: ((v + 1.0 if np.isfinite(v) else 1.0), (hills[k][2], v)) for k, v in zip(order, values)}
+            out = _confirm_predicted(system, hb, segments, on_segment, hills, exact_at_hill, tolerance, out)
+    for k in range(len(segments)):
+        if out[k] is None:
+            out[k] = _locate_one(system, hb, on_segment(k), segments[k], hills.get(k), exact_at_hill.get(k), tolerance,
+                                 max_steps)
+    return out
+
+
+def _confirm_predicted(system, hb, segments, on_segment, hills, exact_at_hill, tolerance, out):
+    """The segments whose exact crossing, predicted from Hill's, the exact multipliers on either
+    side of the prediction confirm (one batched evaluation): their results in `out`."""
+    trial = []
+    for k, (w_hill, slope, _) in hills.items():
+        g0 = exact_at_hill[k][0]
+        if not (np.isfinite(slope) and slope != 0):
+            continue
+        centre = w_hill - g0 / slope
+        half = PREDICTED_HALF_WIDTH * tolerance * abs(centre)
+        pa, _, pb, _ = segments[k]
+        if min(pa, pb) <= centre - half and centre + half <= max(pa, pb):
+            trial += [(k, centre - half), (k, centre + half)]
+    if not trial:
+        return out
+    try:
+        zs = [on_segment(k)(w) for k, w in trial]
+        values = exact_negative_multipliers(system, hb, zs, [w for _, w in trial])
+    except Exception:  # noqa: BLE001 -- those segments are searched one by one
+        return out
+    for j in range(0, len(trial), 2):
+        k = trial[j][0]
+        g_lo, g_hi = values[j] + 1.0, values[j + 1] + 1.0
+        if np.isfinite(g_lo) and np.isfinite(g_hi) and g_lo * g_hi <= 0:
+            best = j if abs(g_lo) <= abs(g_hi) else j + 1
+            pa, _, pb, _ = segments[k]
+            out[k] = (PeriodDoublingPoint(float(trial[best][1]), zs[best], float(values[best]), (pa, pb)), None)
+    return out
+
+
+def _locate_one(system, hb, solve_on_segment, segment, hill, exact_at_hill, tolerance, max_steps):
+    """One segment's crossing by the exact multipliers: bracketed from Hill's crossing (`hill`,
+    with its exact ``g`` if known) where there is one, else over the whole segment; then Illinois."""
+    pa, _, pb, _ = segment
+    solution_free = system.linearization() is system  # the multipliers do not depend on the solution
+
+    def g(w):
+        z = None if solution_free else solve_on_segment(w)
+        mu = exact_negative_multiplier(system, hb, z, w)
+        return (mu + 1.0 if np.isfinite(mu) else 1.0), (z, mu)
+
+    try:
+        bracket = None
+        if hill is not None:
+            try:
+                bracket = _exact_bracket(g, hill[0], hill[1], pa, pb, exact_at_hill)
+            except Exception:  # noqa: BLE001 -- a solve that fails near Hill's crossing: the whole segment
+                bracket = None
+        if bracket is None:
+            bracket = (pa, *g(pa), pb, *g(pb))
+        lo, ga, da, hi, gb, db = bracket
+        if ga * gb > 0:
+            return None, (f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the "
+                          f"exact/variational monodromy does not confirm (most negative real multipliers "
+                          f"{da[1]:.6g}, {db[1]:.6g})")
+        (w, (z, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
+                                      tolerance, max_steps)
+        if z is None:
+            z = solve_on_segment(w)
+    except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+        return None, f"locating the crossing failed: {type(exc).__name__}: {exc}"
+    return PeriodDoublingPoint(float(w), z, float(mu), (float(pa), float(pb))), None
+
+
+def locate_period_doubling(system, hb: HarmonicBalance, solve: Callable, pa: float, za, pb: float, zb, *,
+                           tolerance: float = 1e-7, max_steps: int = 40):
+    """The -1 crossing between branch points ``(pa, za)`` and ``(pb, zb)``:
+    :func:`locate_period_doublings` of that one segment.
 
     **Returns:** ``(PeriodDoublingPoint, None)`` or ``(None, reason)`` when the exact multipliers
     do not confirm a crossing between the points.
     """
-    za, zb = np.asarray(za, dtype=float), np.asarray(zb, dtype=float)
-
-    def solve_on_segment(w):
-        t = 0.0 if pb == pa else (w - pa) / (pb - pa)
-        return solve(w, (1 - t) * za + t * zb)
-
-    def g(w):
-        z = solve_on_segment(w)
-        mu = exact_negative_multiplier(system, hb, z, w)
-        return (mu + 1.0 if np.isfinite(mu) else 1.0), (z, mu)
-
-    bracket = None
-    if system.linearization() is None:
-        hill = _hill_crossing(system, hb, solve_on_segment, pa, pb, tolerance * 10, max_steps)
-        if hill is not None:
-            try:
-                bracket = _exact_bracket(g, *hill, pa, pb)
-            except Exception:  # noqa: BLE001 -- a solve that fails near Hill's crossing: the whole segment
-                bracket = None
-    if bracket is None:
-        bracket = (pa, *g(pa), pb, *g(pb))
-    lo, ga, da, hi, gb, db = bracket
-    if ga * gb > 0:
-        return None, (f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the exact/variational "
-                      f"monodromy does not confirm (most negative real multipliers {da[1]:.6g}, {db[1]:.6g})")
-    (w, (z, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
-                                  tolerance, max_steps)
-    return PeriodDoublingPoint(float(w), z, float(mu), (float(pa), float(pb))), None
+    return locate_period_doublings(system, hb, solve, [(pa, za, pb, zb)], tolerance=tolerance, max_steps=max_steps)[0]
 
 
 # ============================================================================ following the nu = 2 branch

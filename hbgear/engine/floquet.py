@@ -30,7 +30,9 @@ __all__ = [
     "StabilityInfo",
     "classify",
     "hill_exponents",
+    "hill_exponents_along",
     "hill_exponents_batch",
+    "hill_follower",
     "hill_multipliers",
     "hill_multipliers_batch",
     "is_stable",
@@ -160,14 +162,22 @@ def _zero_tol(system, drop_trivial: bool):
     return None
 
 
+def _exponents_and_multipliers(mu, w):
+    """``(lam, mult)`` of exponents ``mu = lam / w``: by decreasing ``|mult|``, the two of a
+    complex pair (equal moduli) with ``Im mult > 0`` first, so every route gives one order."""
+    mult = np.exp(2.0 * np.pi * mu)
+    order = np.lexsort((-mult.imag, -np.abs(mult)))
+    return mu[order] * w, mult[order]
+
+
 def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
                          method: str = "auto"):
     """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
 
-    Small problems get their Hill matrices from one jitted, vmapped call per chunk of points;
-    the refinement runs stacked over all points (:func:`hbgear.engine.hill.refined_central_batch`).
-    On the Duffing benchmark (H = 7) this is several times cheaper per point than one call per
-    point.
+    The Hill matrices come from one jitted, vmapped call per chunk of points
+    (:func:`hbgear.engine.hill.hill_pencils`); the refinement runs stacked over all points
+    (:func:`hbgear.engine.hill.refined_central_batch`). On the Duffing benchmark (H = 7) this is
+    several times cheaper per point than one call per point.
     """
     from .hill import central_exponents, hill_quadratic
 
@@ -177,11 +187,48 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
     a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
     mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
                             copy_tol=copy_tol, method=method)
+    return [_exponents_and_multipliers(mu, wk) for mu, wk in zip(mus, w)]
+
+
+def hill_follower(hb, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6, predict: bool = True):
+    """A :class:`hbgear.engine.hill.CentralFollower` for the branches of `system` discretised by
+    `hb` (for :func:`hill_exponents_along`; `predict`: see there)."""
+    from .hill import CentralFollower
+
+    return CentralFollower(hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial), copy_tol=copy_tol,
+                           predict=predict)
+
+
+def hill_exponents_along(hb, zs, ps, system, follower=None, **kwargs):
+    """:func:`hill_exponents` at consecutive points ``(zs[i], ps[i])`` of a branch, each point's
+    refinement seeded from the point before (:class:`hbgear.engine.hill.CentralFollower`: the
+    same exponents as the unseeded way, which settles the points where the seeded way is not
+    confident). `follower` (:func:`hill_follower`) carries the chain from one call to the next,
+    so a branch can be passed in pieces; keywords as :func:`hill_follower` otherwise. Problems
+    of at most :data:`~hbgear.engine.hill.FOLLOW_MIN_SIZE` unknowns go to
+    :func:`hill_exponents_batch` (the point-by-point Python loop costs more there than the
+    stacked seeds and refinements of all points at once), and so do systems with a free mean
+    coordinate whose trivial exponents are dropped: their Jordan pair at 0 splits by rounding,
+    and whether both halves lie within :data:`TRIVIAL_TOL` changes from point to point (the
+    gear pair with the reaction boundary, H = 24: -4.8e-5 at 13259 rpm), which only the unseeded
+    selection sees.
+    """
+    from .hill import FOLLOW_MIN_SIZE, hill_pencils
+
+    ps = np.atleast_1d(np.asarray(ps, dtype=float))
+    if ps.size == 0:
+        return []
+    follower = hill_follower(hb, system, **kwargs) if follower is None else follower
+    if hb.size <= FOLLOW_MIN_SIZE or follower.zero_tol is not None:
+        return hill_exponents_batch(hb, zs, ps, system, drop_trivial=follower.zero_tol is not None,
+                                    copy_tol=follower.copy_tol)
+    zs = np.atleast_2d(np.asarray(zs, dtype=float))
+    prepared = hb.prepare(system)
     out = []
-    for mu, wk in zip(mus, w):
-        mult = np.exp(2.0 * np.pi * mu)
-        order = np.argsort(-np.abs(mult), kind="stable")
-        out.append((mu[order] * wk, mult[order]))
+    for lo in range(0, len(ps), 32):  # the pencils of 32 points at a time (13 MB at N = 130)
+        parts, w = hill_pencils(hb, zs[lo:lo + 32], ps[lo:lo + 32], system, prepared)
+        pencils = (abc for part in parts for abc in part)
+        out += [_exponents_and_multipliers(follower(abc), wk) for abc, wk in zip(pencils, w)]
     return out
 
 

@@ -16,7 +16,8 @@ Balanced equation, for a system ``M q'' = Q_lin(s, q, q') + Q_nl(s, q, q')`` (se
 - ``E``/``P``: synthesis on / projection from ``N`` uniform samples of the base period (AFT),
   with the jumps of ``Q_nl`` at the breakpoints (pairs entering or leaving contact) taken out
   of the samples and put back with their exact coefficients (:meth:`HarmonicBalance._sample_points`):
-  ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump.
+  ``O(1/N^2)`` instead of the ``O(1/N)`` aliasing of a sampled jump; likewise the jumps at the
+  zeros of a system's ``event_functions``, located along the solution (:mod:`hbgear.engine.events`).
 - A ``free_mean_dof`` has its mean pinned to zero; its slot in ``X`` holds the constant force
   unknown (e.g. the reaction output torque) instead.
 
@@ -41,7 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import fourier, structured
+from . import events, fourier, structured
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 
 
@@ -192,7 +193,10 @@ class HarmonicBalance:
         built in the trace and nothing is frozen (the dense path, whatever the size). On the
         structured path (:attr:`structured`) no kernel and no dense operator are built: the
         rule's structure (:func:`~hbgear.engine.quadrature.lattice_rule`) and, when frozen,
-        the periodic coefficients (:func:`~hbgear.engine.structured.prepare_structured`).
+        the periodic coefficients (:func:`~hbgear.engine.structured.prepare_structured`). A system
+        with ``event_functions`` takes the dense path at any size (its Jacobian carries the
+        moving jumps, :func:`~hbgear.engine.events.jump_jacobian`); ``operator='structured'``
+        is refused for it.
         """
         if _has_tracer((system, p)):
             s, w = mesh_period_rule(system.breakpoints(p, jnp), self.max_mesh_order, jnp)
@@ -201,7 +205,11 @@ class HarmonicBalance:
         # concrete arrays even when first asked for inside a trace (a compiled caller's first
         # call): the caches must never hold tracers
         with jax.ensure_compile_time_eval():
-            if self.structured:
+            if self.structured and events.declared(system, p):
+                if self.operator == "structured":
+                    raise ValueError("operator='structured' does not carry the jumps at a system's event_functions "
+                                     "(contact loss with friction); use operator='dense' or 'auto'")
+            elif self.structured:
                 breakpoints = _breakpoint_key(system, p)
                 lattice = _RULES.get_or_make((breakpoints, self.max_mesh_order, "lattice"),
                                              lambda: self._lattice(system, p))
@@ -454,7 +462,17 @@ class HarmonicBalance:
         s, q, qd, (_, _, weight, delta) = self._sample_points(x, velocity, system, p, layout)
         values = system.force(s, q, qd, p, "nonlinear", extra, jnp)
         N = self.samples
-        return (fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta).reshape(self.size)
+        projected = fourier.project(values[:, :N], self.harmonics, jnp) + _jumps(values[:, N:], weight) @ delta
+        if events.declared(system, p):
+            projected = projected + self._event_correction(x, velocity, extra, p, system)
+        return projected.reshape(self.size)
+
+    def _event_correction(self, x, velocity, extra, p, system):
+        """The jumps of ``Q_nl`` at the zeros of the system's event functions
+        (:func:`hbgear.engine.events.jump_correction`), shape ``(ndof, 2H+1)``."""
+        n = self.ndof
+        return events.jump_correction(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
+                                      self.harmonics, self.nu, self.samples)
 
     def _sample_points(self, x, velocity, system, p, layout=None):
         r"""Where ``Q_nl`` is evaluated: the ``N`` uniform samples of the base period, then each
@@ -581,7 +599,8 @@ class HarmonicBalance:
         ``ndof`` when the system declares ``nonlinear_force_uses_displacement = False``
         (``T_q = 0``, e.g. friction that depends on the velocities only). The jump terms of
         :meth:`_sample_points` add ``delta_c^T dJ_c/dx(t_c) at_c`` from the same pointwise
-        derivatives at the jump phases.
+        derivatives at the jump phases; the jumps at state-dependent zeros of event functions
+        (:meth:`_event_correction`) add :func:`hbgear.engine.events.jump_jacobian`.
         """
         n, H, N = self.ndof, self.harmonics, self.samples
         uses_q = system.nonlinear_force_uses_displacement
@@ -593,7 +612,13 @@ class HarmonicBalance:
         blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, jumps, at_c)
         t_q = self._flatten(blocks[0]) if uses_q else jnp.zeros((self.size, self.size))
         d = fourier.derivative_matrix(H, self.base_frequency(system, p), jnp)
-        return t_q, self._flatten(blocks[-1]), jnp.kron(jnp.eye(n), d)
+        t_v = self._flatten(blocks[-1])
+        if events.declared(system, p):  # the jumps at the event zeros move with the state
+            velocity = self._velocity(x, system, p)
+            e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
+                                            self.harmonics, self.nu, self.samples)
+            t_q, t_v = t_q + self._flatten(e_q), t_v + self._flatten(e_v)
+        return t_q, t_v, jnp.kron(jnp.eye(n), d)
 
     def _nonlinear_derivatives(self, x, extra, p, system, layout=None):
         """``(G, layout)``: the pointwise derivatives of ``Q_nl`` at the sample points of

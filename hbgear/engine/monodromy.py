@@ -20,6 +20,8 @@ saltation matrices; smooth laws are treated exactly.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -237,51 +239,68 @@ def multipliers_linear(system, ps, *, substeps: int | None = None, drop: bool = 
 # ============================================================================ variational
 
 
-_VARIATIONAL_RHS = None
+_VARIATIONAL_RHS: dict = {}
+
+#: A batch of variational equations is padded (copies of its last member) to a power of two and
+#: at least this many members, so that the period-doubling search's two batches (one member per
+#: crossing, then two) share one compiled right-hand side (~0.4 s of tracing each) up to 4 crossings.
+VARIATIONAL_BATCH = 8
 
 
-def _variational_rhs():
+def _variational_rhs(batched: bool = False):
     """The jitted right-hand side at one instant (built once; the system is a pytree argument):
     ``[Phi_v; M^-1 (Q_q Phi_q + Q_qd Phi_v)] * T`` with ``Phi = [Phi_q; Phi_v]`` flattened. Only
     the Jacobians of the force enter (constant terms drop out of the tangents). One compiled call
     per evaluation (the ODE solver calls it ~1000 times per monodromy, ~30000 for the gear pair at
     200 rpm), whose changing inputs come packed in one vector ``y = [s, q, q', Phi]`` (one transfer
-    instead of four: ~35 instead of ~55 us a call)."""
-    global _VARIATIONAL_RHS
-    if _VARIATIONAL_RHS is None:
+    instead of four: ~35 instead of ~55 us a call). `batched`: vmapped over the members
+    ``(q, q', p, M^-1, T, Phi)`` of a batch (``y`` holds them member after member), the phase and
+    the system shared."""
+    if batched not in _VARIATIONAL_RHS:
         import jax
         import jax.numpy as jnp
 
-        def rhs(system, p, minv, period, y):
-            n = minv.shape[0]
-            s, q, qd, phi = y[0], y[1 : 1 + n], y[1 + n : 1 + 2 * n], y[1 + 2 * n :]
-
+        def member(system, s, q, qd, p, minv, period, phi):
             def force(q, qd):
                 return system.force(s, q, qd, p, "all", 0.0, jnp)
 
             dq, dqd = jax.jacfwd(force, argnums=(0, 1))(q, qd)
+            n = q.shape[0]
             phi = phi.reshape(2 * n, 2 * n)
             velocity_rows = minv @ (dq @ phi[:n] + dqd @ phi[n:])
             return (period * jnp.concatenate([phi[n:], velocity_rows])).ravel()
 
-        _VARIATIONAL_RHS = jax.jit(rhs)
-    return _VARIATIONAL_RHS
+        def rhs(system, p, minv, period, y):
+            n = minv.shape[-1]
+            if not batched:
+                return member(system, y[0], y[1:1 + n], y[1 + n:1 + 2 * n], p, minv, period, y[1 + 2 * n:])
+            size = minv.shape[0]
+            q = y[1:1 + size * n].reshape(size, n)
+            qd = y[1 + size * n:1 + 2 * size * n].reshape(size, n)
+            phi = y[1 + 2 * size * n:].reshape(size, -1)
+            return jax.vmap(member, in_axes=(None, None, 0, 0, 0, 0, 0, 0))(system, y[0], q, qd, p, minv, period,
+                                                                           phi).ravel()
+
+        _VARIATIONAL_RHS[batched] = jax.jit(rhs)
+    return _VARIATIONAL_RHS[batched]
 
 
-def state_synthesis(coefficients, harmonics: int, base_frequency: float):
+def state_synthesis(coefficients, harmonics: int, base_frequency):
     """``tau -> (q, q')`` at the base-period fraction ``tau`` (numpy) from real Fourier
-    coefficients ``(ndof, 2H+1)`` [``a_0, a_1, b_1, ...``]: one complex matrix product
-    ``[q; q'] = Re S e(tau)``, ``e_k = exp(2 pi i k tau)``, ``k = 0 .. H``, the powers as the outer
-    product of ``~sqrt(H)`` low and ``~sqrt(H)`` high ones (``2 sqrt(H)`` exponentials per instant
-    instead of ``2H`` sines and cosines).
+    coefficients ``(..., ndof, 2H+1)`` [``a_0, a_1, b_1, ...``] and base frequencies (scalar or
+    ``(...)``): arrays ``(..., ndof)``, from one complex matrix product ``[q; q'] = Re S e(tau)``,
+    ``e_k = exp(2 pi i k tau)``, ``k = 0 .. H``, the powers as the outer product of ``~sqrt(H)``
+    low and ``~sqrt(H)`` high ones (``2 sqrt(H)`` exponentials per instant instead of ``2H`` sines
+    and cosines).
 
     In numpy, not in the compiled right-hand side: a reduction over the harmonics there makes
     XLA hand the program to its worker thread, which costs more than the whole evaluation."""
     c = np.asarray(coefficients, dtype=float)
-    n = c.shape[0]
+    n = c.shape[-2]
     k = np.arange(harmonics + 1)
-    position = np.concatenate([c[:, :1], c[:, 1::2] - 1j * c[:, 2::2]], axis=1)  # q = Re sum c_k e^{i k t}
-    synthesis = np.concatenate([position, 1j * base_frequency * k * position])
+    w = np.asarray(base_frequency, dtype=float)[..., None, None]
+    position = np.concatenate([c[..., :1], c[..., 1::2] - 1j * c[..., 2::2]], axis=-1)  # q = Re sum c_k e^{i k t}
+    synthesis = np.concatenate([position + 0.0 * w, 1j * w * k * position], axis=-2)
     low = int(np.ceil(np.sqrt(harmonics + 1)))
     low_orders = 2j * np.pi * np.arange(low)
     high_orders = 2j * np.pi * low * np.arange(-(-(harmonics + 1) // low))
@@ -289,7 +308,7 @@ def state_synthesis(coefficients, harmonics: int, base_frequency: float):
     def state(tau):
         powers = (np.exp(high_orders * tau)[:, None] * np.exp(low_orders * tau)[None]).ravel()[: harmonics + 1]
         x = (synthesis @ powers).real
-        return x[:n], x[n:]
+        return x[..., :n], x[..., n:]
 
     return state
 
@@ -298,27 +317,45 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
     """Monodromy matrix over one base period ``nu 2 pi / w_exc(p)`` from the variational equations.
 
     **Arguments:** `system`: any :class:`~hbgear.engine.system.PeriodicSystem`; `p`: its
-    parameter; `state`: ``tau -> (q, q')`` along the periodic solution, ``tau`` the fraction of
-    the base period, arrays ``(ndof,)`` (:func:`state_synthesis` of a harmonic-balance solution);
-    `nu`: base period in excitation periods; `rtol`, `atol`: of DOP853 on ``Phi``.
+    parameter, or a 1-D array of parameters (a batch: one integration of all the members'
+    equations together, each evaluation of the right-hand side one vmapped call, so a batch
+    costs about one monodromy; members are padded to a power of two, at least
+    :data:`VARIATIONAL_BATCH`, so few batch sizes compile); `state`: ``tau -> (q, q')`` along the
+    periodic solution(s), ``tau`` the fraction of the base period, arrays ``(ndof,)``
+    (``(len(p), ndof)`` for a batch; :func:`state_synthesis` of harmonic-balance solutions); `nu`:
+    base period in excitation periods; `rtol`, `atol`: of DOP853 on ``Phi`` (a batch of ``K``
+    padded members integrates with ``rtol / sqrt(K)``: its error norm is the RMS over all of them,
+    so each member's stays within `rtol`).
 
-    **Returns:** ``Phi``, shape ``(2n, 2n)``, ``x(T) = Phi x(0)``, ``x = (q, q')`` in SI.
+    **Returns:** ``Phi``, shape ``(2n, 2n)`` (``(len(p), 2n, 2n)``), ``x(T) = Phi x(0)``,
+    ``x = (q, q')`` in SI.
 
-    **Raises:** ``RuntimeError`` if the integrator fails on a segment.
+    **Raises:** ``RuntimeError`` if the integrator fails on a segment; ``ValueError`` for a batch
+    whose members have different breakpoints.
     """
     import jax
     from scipy.integrate import solve_ivp
 
+    batch = np.ndim(p) > 0
+    ps = np.atleast_1d(np.asarray(p, dtype=float))
+    members = len(ps)
     n = system.ndof
-    variational_rhs = _variational_rhs()
-    minv = np.linalg.inv(np.asarray(system.mass_matrix(p, np), dtype=float))
-    base_period = nu * 2.0 * np.pi / float(system.excitation_frequency(p))
-    bp = _segments(system, p)
+    bp = _segments(system, float(ps[0]))
+    if any(not np.array_equal(_segments(system, float(x)), bp) for x in ps[1:]):
+        raise ValueError("monodromy_variational: the members of a batch must have the same breakpoints")
     edges = np.unique(np.concatenate([(j + bp) / nu for j in range(nu)]))
+    size = max(VARIATIONAL_BATCH, 1 << (members - 1).bit_length()) if batch else 1  # padded: few programs
+    pad = np.minimum(np.arange(size), members - 1)
+    minv = np.stack([np.linalg.inv(np.asarray(system.mass_matrix(float(x), np), dtype=float)) for x in ps])[pad]
+    base_period = (nu * 2.0 * np.pi / np.array([float(system.excitation_frequency(float(x))) for x in ps]))[pad]
+    variational_rhs = _variational_rhs(batch)
     # the arguments that stay the same over the ~1000 calls go to the device once (a Python float
     # or numpy argument is converted at every call: most of the cost of a call before)
-    device_system, *constants = jax.device_put((system, float(p), minv, base_period))
-    phi = np.eye(2 * n)
+    if batch:
+        device_system, *constants = jax.device_put((system, ps[pad], minv, base_period))
+    else:
+        device_system, *constants = jax.device_put((system, float(ps[0]), minv[0], float(base_period[0])))
+    phi = np.broadcast_to(np.eye(2 * n), (size, 2 * n, 2 * n)) if batch else np.eye(2 * n)
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a < 1e-14:
             continue
@@ -329,13 +366,17 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
         def rhs(tau, y, lo=lo, hi=hi, start=a, s0=s_lo):
             s = float(np.clip(s0 + (tau - start) * nu, lo, hi))
             q, qd = state(tau)
-            return np.asarray(variational_rhs(device_system, *constants, np.concatenate([[s], q, qd, y])))
+            if batch:
+                q, qd = q[pad], qd[pad]
+            packed = np.concatenate([[s], np.ravel(q), np.ravel(qd), y])
+            return np.asarray(variational_rhs(device_system, *constants, packed))
 
-        sol = solve_ivp(rhs, (a, b), phi.ravel(), method="DOP853", rtol=rtol, atol=atol)
+        sol = solve_ivp(rhs, (a, b), np.ravel(phi), method="DOP853", rtol=rtol / math.sqrt(size),
+                        atol=atol / math.sqrt(size))
         if not sol.success:
             raise RuntimeError(f"variational equations failed on [{a:.6g}, {b:.6g}]: {sol.message}")
-        phi = sol.y[:, -1].reshape(2 * n, 2 * n)
-    return phi
+        phi = sol.y[:, -1].reshape(phi.shape)
+    return phi[:members] if batch else phi
 
 
 def variational_multipliers(hb, system, z, p) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from . import fourier
-from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doubling
+from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doublings
 from .continuation import Branch, Status, continuation, sweep_method
 from .floquet import hill_multipliers, period_doubling
 from .hb import HarmonicBalance, residual_functions
@@ -318,25 +318,25 @@ def _locate_and_follow(system, hb, branch, multipliers, *, follow, tolerance, ma
         return np.asarray(result.z)
 
     candidates, flags = _period_doubling_candidates(multipliers)
+    t0 = time.perf_counter()
+    located = locate_period_doublings(system, hb, solve_nu1, [(branch.p[i], branch.z[i], branch.p[i + 1],
+                                                               branch.z[i + 1]) for i in candidates])
+    share = (time.perf_counter() - t0) / max(len(candidates), 1)  # the crossings are located together
     records, doubled, ends = [], [], []
-    for i in candidates:
+    for i, (point, why) in zip(candidates, located):
         t0 = time.perf_counter()
         pa, pb = float(branch.p[i]), float(branch.p[i + 1])
         rec = {"bracket": [pa, pb], "bracket_rows": [i, i + 1], "branch": None,
                "unstable_side": "below" if (flags[i] > flags[i + 1]) == (pa < pb) else "above"}
-        try:
-            point, why = locate_period_doubling(system, hb, solve_nu1, pa, branch.z[i], pb, branch.z[i + 1])
-        except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
-            point, why = None, f"locating the crossing failed: {type(exc).__name__}: {exc}"
         if point is None:
             rec.update(status="not confirmed" if why.startswith("the multipliers") else "failed", message=why,
-                       time_s=time.perf_counter() - t0)
+                       time_s=share + time.perf_counter() - t0)
             records.append(rec)
             continue
         rec.update(parameter=point.p, multiplier=point.multiplier)
         rec.update(_follow_record(system, point, hb, follow, ends, doubled, tolerance, max_points, p_range, progress,
                                   harmonics2, samples2))
-        rec["time_s"] = time.perf_counter() - t0
+        rec["time_s"] = share + time.perf_counter() - t0
         records.append(rec)
     return records, doubled
 

@@ -6,7 +6,8 @@ At each point the multipliers come from the cheapest exact route that applies:
   points) where the system's :meth:`~hbgear.engine.system.PeriodicSystem.linearization` holds
   along the solution (a linear system everywhere; e.g. the gear pair with backlash where the
   teeth keep contact);
-- **Hill's method** (:func:`hbgear.engine.floquet.hill_multipliers_batch`, in batches) elsewhere.
+- **Hill's method** elsewhere, along each run of neighbouring points with every point seeded
+  from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`).
 
 Multipliers are over the base period of the discretisation (``nu`` excitation periods). A batch
 that fails is redone point by point, so one bad point costs only itself (``None``).
@@ -19,14 +20,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .floquet import hill_multipliers, hill_multipliers_batch, stable_verdict
+from .floquet import TRIVIAL_TOL, hill_exponents_along, hill_follower, hill_multipliers, neutral_mask, stable_verdict
 
 __all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
            "ZONE_SCAN_SUBDIVISIONS"]
 
-#: Points per call of :func:`~hbgear.engine.floquet.hill_multipliers_batch` (one vmapped
-#: Hill-matrix evaluation and one stacked eigen-decomposition; the progress bar steps by this).
-HILL_BATCH = 32
+#: Points per call of :func:`~hbgear.engine.floquet.hill_exponents_along` (the progress bar
+#: steps by this; a batch that fails is redone point by point).
+HILL_BATCH = 128
 
 #: Sub-intervals per branch step of the exact scan for unstable zones (:func:`unstable_zones`).
 ZONE_SCAN_SUBDIVISIONS = 6
@@ -54,24 +55,40 @@ def _progress(total, label, progress):
     return tqdm(total=total, desc=label, leave=False, file=sys.stderr)
 
 
+def _runs(indices) -> list[list[int]]:
+    """`indices` (increasing) cut into runs of consecutive values (neighbours on the branch)."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and i == runs[-1][-1] + 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
+
+
 def _hill_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[str]:
-    """Hill multipliers at the points `indices` into ``out[i]``, a batch at a time; a failing
-    batch is redone point by point. **Returns:** the failure messages."""
+    """Hill multipliers at the points `indices` into ``out[i]``, a batch at a time along each run
+    of neighbouring points (each point seeded from the one before:
+    :func:`~hbgear.engine.floquet.hill_exponents_along`); a failing batch is redone point by
+    point. **Returns:** the failure messages."""
     failures = []
     bar = _progress(len(indices), label, progress)
-    for lo in range(0, len(indices), HILL_BATCH):
-        batch = indices[lo:lo + HILL_BATCH]
-        try:
-            for i, m in zip(batch, hill_multipliers_batch(hb, zs[batch], ps[batch], system)):
-                out[i] = np.asarray(m)
-        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
-            for i in batch:
-                try:
-                    out[i] = np.asarray(hill_multipliers(hb, zs[i], float(ps[i]), system))
-                except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
-                    failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
-        if bar is not None:
-            bar.update(len(batch))
+    for run in _runs(indices):
+        follower = hill_follower(hb, system)
+        for lo in range(0, len(run), HILL_BATCH):
+            batch = run[lo:lo + HILL_BATCH]
+            try:
+                for i, (_, m) in zip(batch, hill_exponents_along(hb, zs[batch], ps[batch], system, follower)):
+                    out[i] = np.asarray(m)
+            except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+                follower.reset()
+                for i in batch:
+                    try:
+                        out[i] = np.asarray(hill_multipliers(hb, zs[i], float(ps[i]), system))
+                    except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
+                        failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
+            if bar is not None:
+                bar.update(len(batch))
     if bar is not None:
         bar.close()
     return failures
@@ -112,7 +129,7 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
             hill, exact = sorted(hill + exact), []
     failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label)
     exact_text = "exact monodromy (hbgear.engine.monodromy.multipliers_linear)"
-    hill_text = "Hill's method (hbgear.engine.floquet.hill_multipliers_batch)"
+    hill_text = "Hill's method (hbgear.engine.floquet.hill_exponents_along)"
     if not hill:
         method = exact_text
     elif not exact:
@@ -128,6 +145,18 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
     stable = np.array([np.nan if m is None else float(stable_verdict(system, float(p), m, hb.nu))
                        for p, m in zip(ps, out)])
     return BranchStability(out, max_abs, stable, method, warning)
+
+
+def _stable_rows(system, ps, mult: np.ndarray, nu: int = 1) -> np.ndarray:
+    """:func:`~hbgear.engine.floquet.stable_verdict` of every row of `mult` ``(m, k)`` at the
+    parameters `ps` ``(m,)``, vectorised (the system's known neutral multipliers left out)."""
+    mult = np.asarray(mult)
+    if mult.shape[-1] == 0:
+        return np.zeros(len(mult), dtype=bool)
+    mask = neutral_mask(mult, system.neutral_multipliers(np.asarray(ps, dtype=float), nu), TRIVIAL_TOL)
+    finite = np.all(np.isfinite(mult), axis=-1)
+    with np.errstate(invalid="ignore"):
+        return finite & (np.max(np.where(mask, 0.0, np.abs(mult)), axis=-1) <= 1.0 + 1e-9)
 
 
 def leaves_through(multiplier) -> str:
@@ -153,7 +182,7 @@ def unstable_zones(system, ps, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> li
     frac = np.arange(subdivisions) / subdivisions
     grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
     mult = np.concatenate([np.asarray(multipliers_linear(system, grid[lo:lo + 512])) for lo in range(0, len(grid), 512)])
-    unstable = np.array([not stable_verdict(system, float(p), m) for p, m in zip(grid, mult)])
+    unstable = ~_stable_rows(system, grid, mult)
     zones = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):

@@ -57,6 +57,10 @@ shapes returned, ``is_linear`` at a probe state):
   forcing (``w`` the base frequency), so the impulses are exact in the harmonic balance; a time
   integrator of the same system applies them as velocity kicks ``M dv = [G]``. ``G`` counts as
   forcing in the rules below (``forcing_affine_in_frequency``: ``dG/dt = w_exc dG/ds``).
+- ``event_functions(s, q, qd, p, xp)`` -- ``None`` (default) or scalar functions of the state,
+  shape ``(E,) + s.shape``, across whose zeros ``Q_nl`` may jump (contact loss: a force that
+  exists only while two surfaces touch). The engine locates their zeros along the solution and
+  corrects those jumps exactly (:mod:`hbgear.engine.events`); kinks need no declaration.
 - ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
   replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
   its two trivial Floquet multipliers at 1 are dropped.
@@ -151,13 +155,17 @@ class PeriodicSystem:
         :meth:`linearization` holds."""
         return True
 
+    def event_functions(self, s, q, qd, p, xp=np):
+        """Functions across whose zeros ``Q_nl`` may jump, shape ``(E,) + s.shape``, or ``None`` (default)."""
+        return None
+
 
 def check_system(system, p) -> None:
     """Check `system` against the contract at parameter `p` (numpy; a few force evaluations).
 
     **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
-    first broken rule: ``ndof`` not a positive integer, a mass matrix, force or derivative forcing
-    of the wrong shape or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
+    first broken rule: ``ndof`` not a positive integer, a mass matrix, force, derivative forcing or
+    event functions of the wrong shape or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
     ``is_linear = True`` with a nonzero nonlinear part.
     """
     if not isinstance(system, PeriodicSystem):
@@ -189,6 +197,10 @@ def check_system(system, p) -> None:
     if g is not None and (np.shape(g) != (n, 2) or not np.all(np.isfinite(np.asarray(g, dtype=float)))):
         raise ValueError(f"{name}.derivative_forcing(s, p) returned shape {np.shape(g)} for s of shape (2,): "
                          f"None or ({n}, 2) finite values")
+    e = system.event_functions(s, q, qd, p, np)
+    if e is not None and (np.ndim(e) != 2 or np.shape(e)[1:] != (2,) or not np.all(np.isfinite(np.asarray(e, dtype=float)))):
+        raise ValueError(f"{name}.event_functions(s, q, qd, p) returned shape {np.shape(e)} for s of shape (2,): "
+                         "None or (E, 2) finite values")
     if system.is_linear:
         f = np.asarray(system.force(s, q, qd, p, "nonlinear", 0.0, np), dtype=float)
         if np.max(np.abs(f)) > 1e-12 * float(system.force_scale):

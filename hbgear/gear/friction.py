@@ -115,8 +115,10 @@ class KelleyLemanski(FrictionLaw):
         )
         if isinstance(self.v_reg, (int, float)) and self.v_reg == 0.0:
             sign = xp.sign(vs)
-        else:
-            sign = (2.0 / np.pi) * xp.arctan(vs / self.v_reg)
+        else:  # v_reg may be traced: sgn where it is 0 (no 0/0, no infinite derivative)
+            smooth = self.v_reg > 0.0
+            regularized = (2.0 / np.pi) * xp.arctan(vs / xp.where(smooth, self.v_reg, 1.0))
+            sign = xp.where(smooth, regularized, xp.sign(vs))
         return magnitude * sign
 
     def regularized(self, v_reg_m_per_s: float) -> FrictionLaw:

@@ -73,7 +73,6 @@ PAIR_SLOTS = 2
 #: Breakpoints closer than this (in mesh phase) are one (a table node at the end of the path and
 #: the pair exit, rounding).
 _SAME_PHASE = 1e-12
-GATE = 100.0
 
 
 class PairContact(NamedTuple):
@@ -204,6 +203,13 @@ class RectangularMesh:
         gap = x if formulation == "B" else np.abs(x)
         return gap - 0.5 * float(model.backlash_m)
 
+    def contact_events(self, model, s, x, xp=np):
+        """``(x - b, x + b)``: where the dead zone's flanks close (``None`` without backlash)."""
+        if model.contact == "linear":
+            return None
+        b = 0.5 * model.backlash_m
+        return xp.stack([x - b, x + b])
+
     def compressive_force(self, model, s, x, xd, omega_mesh) -> np.ndarray:
         """``F_mesh`` (formulation B's loads are affine while it stays positive)."""
         return np.asarray(self.force(model, s, x, xd, omega_mesh, np))
@@ -316,12 +322,36 @@ class PairContactMesh:
         closure = x - b - e
         if self.is_linear(model):
             return PairContact(k * closure + c * (xd - rate), in_path, 0.0 * in_path)
-        width = model.normal_load_N / (GATE * self.k_mean_N_per_m)
-        drive = in_path * xp.clip(closure / width, 0.0, 1.0)
-        back = in_path * xp.clip(-(x + b) / width, 0.0, 1.0)
-        force = (k * xp.maximum(closure, 0.0) + drive * c * (xd - rate)
-                 + k * xp.minimum(x + b, 0.0) + back * c * xd)
+        drive = in_path * xp.where(closure > 0.0, 1.0, 0.0)
+        back = in_path * xp.where(x + b < 0.0, 1.0, 0.0)
+        force = drive * (k * closure + c * (xd - rate)) + back * (k * (x + b) + c * xd)
         return PairContact(force, drive, back)
+
+    def contact_events(self, model, s, x, xp=np):
+        """Functions of ``x`` whose zeros are the instants where a pair's contact (and with it its
+        damper and its friction load) switches: ``(h_0 h_1 / d_0^2, (x + b)/d_0)``, ``d_0 = N/k_mean``,
+        shape ``(2,) + x.shape``; ``None`` for a mesh whose pairs cannot separate.
+
+        ``h_j = x - b - e_j`` is the drive-flank closure of slot ``j`` (tooth age ``s + j``). The
+        slots swap teeth at ``s = 0``, so each ``h_j`` jumps there while the product does not: for
+        the ages ``Gamma <= s + 1 < 2`` past the exit the relief is continued linearly from its value
+        at the exit to its value at entry, which makes ``h_1(1^-) = h_0(0^+)`` (a zero of the product
+        out of the path is harmless: no force jumps there). The back flank (unrelieved) closes at
+        ``x = -b`` for every pair.
+        """
+        if self.is_linear(model):
+            return None
+        xi_p, _, in_path, _ = model.pair_positions(s, xp)
+        path = _path(model)
+        e = self.modification.deviation(path, xi_p, xp)
+        entry = self.modification.deviation(path, path.contact_start_m + 0.0 * s, xp)
+        exit_ = self.modification.deviation(path, path.contact_end_m + 0.0 * s, xp)
+        gamma = model.contact_ratio
+        beyond = exit_ + (entry - exit_) * (s + 1.0 - gamma) / (2.0 - gamma)
+        e1 = xp.where(in_path[1] > 0.0, e[1], beyond)
+        b = _half_backlash(model)
+        d0 = model.normal_load_N / self.k_mean_N_per_m
+        return xp.stack([(x - b - e[0]) * (x - b - e1) / d0 ** 2, (x + b) / d0])
 
     def force(self, model, s, x, xd, omega_mesh, xp=np):
         """``F_mesh = sum_j F_j`` [N]."""

@@ -6,6 +6,10 @@ Coordinates (SI):
 - boundary ``"spring"`` / ``"reaction"``: ``q = (delta, u)`` with ``u = R_bg (theta_g - theta_g,s)``
   [m] the gear's base-circle displacement about its static wind-up ``theta_g,s`` on the soft
   output spring, so that ``R_bp theta_p = delta + u + u_s``.
+- with ``bearings`` (MODEL.md section 10) the centre translations ``(y_p, x_p, y_g, x_g)`` follow,
+  with ``shafts`` the twists ``(t_d, t_l)`` of the drive and load shafts; the general layout is
+  :class:`DofLayout` (physical coordinates ``r = P q + r_s``, ``M = P^T M_r P``, ``Q = P^T Q_r``),
+  of which the two layouts above are the rigid-bearing, shaftless case.
 
 Equations of motion ``M q'' = Q(t, q, q')`` with, for two coordinates (``m_p = J_p/R_bp^2``,
 ``m_g = J_g/R_bg^2``; the second row is the sum of the pinion and gear equations, so ``M`` is
@@ -38,6 +42,7 @@ import jax
 import numpy as np
 from jax.tree_util import register_dataclass
 
+from .dofs import Bearings, Shafts, dof_layout
 from .friction import FrictionLaw
 from .mesh import PAIR_SLOTS, PairContact, RectangularMesh
 
@@ -48,6 +53,7 @@ __all__ = ["GearPairModel", "PAIR_SLOTS"]
 COUPLINGS = ("LTI", "LTV", "NLTV")
 FORMULATIONS = ("A", "B")
 BOUNDARIES = ("torques", "spring", "reaction")
+LTI_FRICTION = ("excitation", "damping", "both")
 
 
 @register_dataclass
@@ -75,6 +81,9 @@ class GearPairModel:
     - `face_width_m`: face width [m] (load per unit width for load-dependent laws).
     - `spring_stiffness_ratio`: ``k_mean R_bg^2 / k_b`` [-]; `spring_damping_ratio`: damping
       ratio of the soft output mode [-].
+    - `bearings`: ``None`` (rigid bearings) or :class:`~hbgear.gear.dofs.Bearings` (centre
+      translations, MODEL.md section 10); `shafts`: ``None`` or :class:`~hbgear.gear.dofs.Shafts`
+      (drive and load inertias on torsional shafts). Coordinates: :mod:`hbgear.gear.dofs`.
     - `coupling`: ``"LTI" | "LTV" | "NLTV"``; `formulation`: ``"A" | "B"``;
       `boundary`: ``"torques" | "spring" | "reaction"``;
       `damping_model`: ``"constant" | "proportional"`` (``c(t) = c k(t)/k_mean``);
@@ -82,7 +91,10 @@ class GearPairModel:
       `normal_loads`: ``"compressive"`` (MODEL.md section 11, :meth:`friction_loads`) or
       ``"signed"`` (``sigma_j N`` / ``sigma_j F_mesh`` whatever the contact: not a physical model,
       the linearisation along solutions with drive-flank contact and ``F_mesh > 0``; see
-      :func:`hbgear.gear.system.linear_equivalent`).
+      :func:`hbgear.gear.system.linear_equivalent`);
+      `lti_friction` (LTI only): the friction as the Fourier excitation of the nominal friction
+      torques (``"excitation"``, Eq. 10), as the energy-equivalent viscous damper at the mesh
+      (``"damping"``, :meth:`lti_friction_damping_Ns_per_m`) or both (``"both"``).
     - `mesh`: the tooth mesh (:mod:`hbgear.gear.mesh`): :class:`~hbgear.gear.mesh.RectangularMesh`
       (default, the paper's) or :class:`~hbgear.gear.mesh.PairContactMesh` (per-pair contact, which
       damps each pair in proportion to its stiffness: `damping_model` must be ``"proportional"``).
@@ -109,6 +121,8 @@ class GearPairModel:
     face_width_m: float
     spring_stiffness_ratio: float
     spring_damping_ratio: float
+    bearings: Bearings | None = None
+    shafts: Shafts | None = None
     coupling: str = field(default="LTV", metadata=dict(static=True))
     formulation: str = field(default="A", metadata=dict(static=True))
     boundary: str = field(default="spring", metadata=dict(static=True))
@@ -116,6 +130,7 @@ class GearPairModel:
     contact: str = field(default="linear", metadata=dict(static=True))
     normal_loads: str = field(default="compressive", metadata=dict(static=True))
     mesh: Any = RectangularMesh()
+    lti_friction: str = field(default="excitation", metadata=dict(static=True))
 
     def __post_init__(self):
         # pytree unflattening may pass placeholders; only check real strings
@@ -126,6 +141,7 @@ class GearPairModel:
             ("damping_model", ("constant", "proportional")),
             ("contact", ("linear", "backlash")),
             ("normal_loads", ("compressive", "signed")),
+            ("lti_friction", LTI_FRICTION),
         ):
             value = getattr(self, name)
             if isinstance(value, str) and value not in allowed:
@@ -136,6 +152,8 @@ class GearPairModel:
                 raise ValueError("formulation 'B' (dynamic normal loads) needs coupling 'LTV' or 'NLTV', not 'LTI'")
             if isinstance(self.contact, str) and self.contact == "backlash":
                 raise ValueError("contact 'backlash' needs coupling 'LTV' or 'NLTV', not 'LTI' (LTI is linear)")
+        elif isinstance(self.coupling, str) and isinstance(self.lti_friction, str) and self.lti_friction != "excitation":
+            raise ValueError(f"lti_friction {self.lti_friction!r} needs coupling 'LTI', not {self.coupling!r}")
         if getattr(self.mesh, "per_pair", False) is True and self.damping_model == "constant":
             raise ValueError("per-pair contact damps each pair as c k_j/k_mean (MODEL.md section 9): "
                              "damping_model must be 'proportional'")
@@ -145,8 +163,13 @@ class GearPairModel:
 
     # -- derived constants -------------------------------------------------------------------
     @property
+    def layout(self):
+        """The :class:`~hbgear.gear.dofs.DofLayout` of this structure (boundary, bearings, shafts)."""
+        return dof_layout(self.boundary, self.bearings is not None, self.shafts is not None)
+
+    @property
     def ndof(self) -> int:
-        return 1 if self.boundary == "torques" else 2
+        return self.layout.ndof
 
     @property
     def k_mean_N_per_m(self):
@@ -195,8 +218,9 @@ class GearPairModel:
 
     @property
     def spring_damping_Ns_per_m(self):
-        """``c_u = 2 zeta_b sqrt(k_u (m_p + m_g))`` [N s/m], the soft mode's own damping."""
-        mass = self.mass_pinion_kg + self.mass_gear_kg
+        """``c_u = 2 zeta_b sqrt(k_u M_uu)`` [N s/m] (``M_uu`` = :attr:`rigid_mass_kg`, ``m_p + m_g``
+        without shafts), the soft mode's own damping."""
+        mass = self.rigid_mass_kg
         return 2.0 * self.spring_damping_ratio * (self.spring_stiffness_N_per_m * mass) ** 0.5
 
     @property
@@ -204,12 +228,60 @@ class GearPairModel:
         """``k_b = k_mean R_bg^2 / ratio`` [N m/rad]."""
         return self.spring_stiffness_N_per_m * self.base_radius_gear_m**2
 
+    @property
+    def rigid_mass_kg(self):
+        """Mass of the free rigid rotation, every arc moving together [kg]: ``m_p + m_g`` (+ the drive
+        and load inertias ``J_d/R_bp^2 + J_l/R_bg^2`` with shafts), ``M_uu`` of the ``u`` coordinate."""
+        masses = self.physical_masses()
+        total = masses["a_p"] + masses["a_g"]
+        if self.shafts is not None:
+            total = total + masses["a_d"] + masses["a_l"]
+        return total
+
+    def physical_masses(self) -> dict:
+        """The diagonal ``M_r`` [kg] by physical coordinate (:mod:`hbgear.gear.dofs`)."""
+        masses = {"a_p": self.mass_pinion_kg, "a_g": self.mass_gear_kg}
+        if self.shafts is not None:
+            masses["a_d"] = self.shafts.inertia_drive_kgm2 / self.base_radius_pinion_m**2
+            masses["a_l"] = self.shafts.inertia_load_kgm2 / self.base_radius_gear_m**2
+        if self.bearings is not None:
+            masses.update(zip(("y_p", "x_p", "y_g", "x_g"), self.bearings.masses))
+        return masses
+
+    def projection(self) -> dict:
+        """``P`` of ``r = P q + r_s`` by physical coordinate: a list over ``q`` of Python floats (the
+        structure) or, for the ``"torques"`` boundary, the Schur projection ``P_q - P_u G`` whose
+        rotation entries depend on the masses (:mod:`hbgear.gear.dofs`)."""
+        lay = self.layout
+        keep = [lay.generalized.index(n) for n in lay.coordinates]
+        rows = {name: [float(lay.matrix[i, j]) for j in keep] for i, name in enumerate(lay.physical)}
+        if lay.eliminated is None:
+            return rows
+        e = lay.generalized.index(lay.eliminated)
+        masses = self.physical_masses()
+        moving = [(name, i) for i, name in enumerate(lay.physical) if lay.matrix[i, e] != 0.0]
+        total = self.rigid_mass_kg
+        for jj, j in enumerate(keep):
+            terms = [masses[name] * lay.matrix[i, j] for name, i in moving if lay.matrix[i, j] != 0.0]
+            if not terms:
+                continue
+            share = sum(terms[1:], terms[0]) / total  # G_j = M_uj / M_uu
+            for name, i in moving:
+                rows[name][jj] = rows[name][jj] - share * lay.matrix[i, e]
+        return rows
+
     def mass_matrix(self, xp=np):
-        """``M`` [kg], shape ``(ndof, ndof)``."""
-        if self.ndof == 1:
-            return xp.reshape(xp.asarray(self.mass_equivalent_kg), (1, 1))
-        mp, mg = self.mass_pinion_kg, self.mass_gear_kg
-        return xp.asarray([[mp, mp], [mp, mp + mg]])
+        """``M = P^T M_r P`` [kg], shape ``(ndof, ndof)``."""
+        masses, rows, n = self.physical_masses(), self.projection(), self.ndof
+        matrix = [[0.0] * n for _ in range(n)]
+        for name, row in rows.items():
+            for j in range(n):
+                for k in range(n):
+                    term = _scaled(masses[name], row[j])
+                    term = None if term is None else _scaled(term, row[k])
+                    if term is not None:
+                        matrix[j][k] = term if _is_zero(matrix[j][k]) else matrix[j][k] + term
+        return xp.asarray(matrix)
 
     def speeds(self, omega_pinion):
         """``(Omega_p, Omega_g, w_m)`` [rad/s] from the pinion speed."""
@@ -272,13 +344,33 @@ class GearPairModel:
     def angular_velocities(self, qd, omega_pinion, nominal: bool):
         """Total speeds ``(Omega_p + theta_p', Omega_g + theta_g')`` [rad/s].
 
-        ``theta_p' = (delta' + u')/R_bp``, ``theta_g' = u'/R_bg``; nominal speeds when
-        `nominal` (LTI, LTV) or when the model has the single coordinate ``delta``.
+        ``theta_p' = a_p'/R_bp``, ``theta_g' = a_g'/R_bg`` (two coordinates: ``a_p' = delta' + u'``,
+        ``a_g' = u'``); nominal speeds when `nominal` (LTI, LTV) or when the free rotation is
+        eliminated (``"torques"``: only the vibration relative to it is known).
         """
+        return self._speeds_of(("a_p", "a_g"), qd, omega_pinion, nominal)
+
+    def body_speeds(self, qd, omega_pinion):
+        """Total speeds [rad/s] of the bodies the input torque and the output boundary act on (the
+        drive and load inertias with shafts, else pinion and gear), as :meth:`angular_velocities`."""
+        lay = self.layout
+        return self._speeds_of((lay.input_body, lay.output_body), qd, omega_pinion, False)
+
+    def _speeds_of(self, bodies, qd, omega_pinion, nominal):
         wp, wg, _ = self.speeds(omega_pinion)
-        if nominal or self.ndof == 1:
+        if nominal or self.layout.eliminated is not None:
             return wp + 0.0 * qd[0], wg + 0.0 * qd[0]
-        return wp + (qd[0] + qd[1]) / self.base_radius_pinion_m, wg + qd[1] / self.base_radius_gear_m
+        rows = self.projection()
+        return (wp + _combine(rows[bodies[0]], qd) / self.base_radius_pinion_m,
+                wg + _combine(rows[bodies[1]], qd) / self.base_radius_gear_m)
+
+    def centre_sliding_velocity(self, qd):
+        """``x_p' - x_g'`` [m/s], what the centres add to the sliding velocity (MODEL.md section 10),
+        or ``None`` with rigid bearings."""
+        if self.bearings is None:
+            return None
+        lay = self.layout
+        return qd[lay.index("x_p")] - qd[lay.index("x_g")]
 
     def mesh_force(self, s, q, qd, omega_pinion, xp=np):
         """``F_mesh`` [N] of the mesh at ``x = delta - eps``, ``x' = delta' - eps'`` (rectangular:
@@ -302,6 +394,23 @@ class GearPairModel:
         _, _, wm = self.speeds(omega_pinion)
         eps, deps = self.static_transmission_error(s, wm, xp)
         return self.mesh.pairs(self, s, q[0] - eps, qd[0] - deps, wm, xp)
+
+    def contact_events(self, s, q, omega_pinion, xp=np):
+        """Functions of ``x = delta - eps`` whose zeros are where the contact gate of the friction
+        loads (and, per pair, of the pair dampers) jumps, shape ``(E,) + q[0].shape``, else ``None``.
+
+        Rectangular with backlash, friction and ``normal_loads = "compressive"``: ``(x - b, x + b)``
+        -- formulation A's load ``sigma_j N`` switches on and off at ``x = b``; formulation B's
+        ``sigma_j max(+-F_mesh, 0)`` jumps where a flank closes with ``F_mesh = c x' != 0``. Per-pair
+        contact that may open: every pair's flanks (:meth:`~hbgear.gear.mesh.PairContactMesh.contact_events`),
+        where its damper force jumps, whatever the friction.
+        """
+        per_pair = getattr(self.mesh, "per_pair", False)
+        if not per_pair and (self.normal_loads != "compressive" or self.friction.name == "none"):
+            return None
+        _, _, wm = self.speeds(omega_pinion)
+        eps, _ = self.static_transmission_error(s, wm, xp)
+        return self.mesh.contact_events(self, s, q[0] - eps, xp)
 
     def friction_loads(self, s, q, qd, omega_pinion, quasi_static, xp=np):
         """Normal loads ``N_j >= 0`` of the pairs [N] and their part in the linear split.
@@ -346,6 +455,9 @@ class GearPairModel:
         nonlinear = self.coupling == "NLTV"
         wp_tot, wg_tot = self.angular_velocities(qd, omega_pinion, nominal=not nonlinear)
         vs = xi_p * wp_tot[None] - xi_g * wg_tot[None]
+        centres = self.centre_sliding_velocity(qd) if nonlinear else None
+        if centres is not None:
+            vs = vs + centres[None]
         vr = xi_p * wp_tot[None] + xi_g * wg_tot[None]
         normal, affine = self.friction_loads(s, q, qd, omega_pinion, quasi_static, xp)
         law_load = normal if nonlinear else quasi_static
@@ -382,14 +494,53 @@ class GearPairModel:
         """``(T_fp, T_fg)`` [N m]: ``-sum mu_j N_j xi_p,j`` and ``+sum mu_j N_j xi_g,j``.
 
         `part`: ``"all"``; ``"linear"`` (the loads' affine part of :meth:`friction_loads`) or
-        ``"nonlinear"`` (the rest), the split of :meth:`generalized_force`.
+        ``"nonlinear"`` (the rest), the split of :meth:`generalized_force`. LTI with
+        ``lti_friction`` ``"damping"`` / ``"both"``: the viscous damper ``c_f delta'`` at the mesh
+        (its torques ``-R_bp c_f delta'``, ``+R_bg c_f delta'``) replaces / joins the excitation.
         """
+        return self.friction_actions(s, q, qd, omega_pinion, xp, part)[:2]
+
+    def friction_actions(self, s, q, qd, omega_pinion, xp=np, part="all"):
+        """``(T_fp, T_fg, F_fp, F_fg)``: the friction torques [N m] of :meth:`friction_torques` and
+        the OLOA forces on the centres [N], ``F_fp = -sum mu_j N_j``, ``F_fg = +sum mu_j N_j``
+        (MODEL.md section 10: ``T_fp = sum_j xi_p,j F_fp,j``); `part` as there."""
         pf, affine = self._pair_friction(s, q, qd, omega_pinion, xp)
         if part == "all":
             friction = pf["friction"]
         else:
             friction = pf["mu"] * (affine if part == "linear" else pf["normal"] - affine)
-        return -xp.sum(friction * pf["xi_p"], axis=0), xp.sum(friction * pf["xi_g"], axis=0)
+        total = xp.sum(friction, axis=0)
+        t_fp, t_fg = -xp.sum(friction * pf["xi_p"], axis=0), xp.sum(friction * pf["xi_g"], axis=0)
+        if self.coupling != "LTI" or self.lti_friction == "excitation":
+            return t_fp, t_fg, -total, total
+        if self.lti_friction == "damping":  # the damper replaces the friction, its OLOA forces too
+            t_fp, t_fg, total = 0.0 * t_fp, 0.0 * t_fg, 0.0 * total
+        # the equivalent damper acts at the mesh, along the line of action: torques only
+        damper = self.lti_friction_damping_Ns_per_m(omega_pinion, xp) * qd[0]
+        return t_fp - self.base_radius_pinion_m * damper, t_fg + self.base_radius_gear_m * damper, -total, total
+
+    def lti_friction_damping_Ns_per_m(self, omega_pinion, xp=np):
+        r"""Energy-equivalent viscous damping of the friction loss, ``c_f`` [N s/m] (LTI).
+
+        ``c_f = <sum_j |mu_j| sigma_j N |V_s,j|> / <sum_j sigma_j V_s,j^2>``: the mean friction loss
+        of the nominal kinematics with quasi-static loads (paper p. 386, "for one meshing cycle, the
+        energy loss is int sum mu_i N_i xi_i d theta_i") over the mean square of the nominal sliding
+        velocities, the reference velocity; a damper ``c_f v`` sliding at those velocities
+        dissipates that loss (equal energy per cycle, the classical equivalent viscous damping).
+        It acts at the mesh on ``delta'``. Means over the mesh period by the quadrature between the
+        breakpoints (exact for the Coulomb law's pieces). Zero unless LTI with damping.
+        """
+        if self.coupling != "LTI" or self.lti_friction == "excitation":
+            return 0.0 * omega_pinion
+        from ..engine.quadrature import mesh_period_rule
+
+        s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
+        xi_p, xi_g, _, sigma = self.pair_positions(s, xp)
+        wp, wg, _ = self.speeds(omega_pinion)
+        vs, vr = xi_p * wp - xi_g * wg, xi_p * wp + xi_g * wg
+        mu = self.friction.mu(vs, vr, sigma * self.normal_load_N / self.face_width_m, xp)
+        loss = xp.sum(w * xp.sum(xp.abs(mu) * sigma * self.normal_load_N * xp.abs(vs), axis=0))
+        return loss / xp.sum(w * xp.sum(sigma * vs * vs, axis=0))
 
     # -- the split into linear-periodic and nonlinear parts -------------------------------------
     @property
@@ -433,26 +584,74 @@ class GearPairModel:
         take_mesh = part == "all" or (part == "linear") == self.mesh_is_linear
         take_friction = part == "all" or (self.friction_has_linear_part if part == "linear" else not self.friction_is_linear)
         take_constant = part in ("all", "linear")
-        zero = 0.0 * s
+        lay, rows = self.layout, self.projection()
         rbp, rbg = self.base_radius_pinion_m, self.base_radius_gear_m
-        mesh = self.mesh_force(s, q, qd, omega_pinion, xp) if take_mesh else zero
+        out = [None] * lay.ndof  # Q, row by row; elements add in a fixed order (mesh, friction, torques, ...)
+        if take_mesh:  # the mesh acts on delta = q[0]: virtual work -F_mesh d delta
+            out[0] = -self.mesh_force(s, q, qd, omega_pinion, xp)
         if take_friction:
-            t_fp, t_fg = self.friction_torques(s, q, qd, omega_pinion, xp, part)
-        else:
-            t_fp = t_fg = zero
-        if self.ndof == 1:
-            load = self.normal_load_N + zero if take_constant else zero
-            friction = self.mass_equivalent_kg * (t_fp / (rbp * self.mass_pinion_kg) - t_fg / (rbg * self.mass_gear_kg))
-            return xp.stack([load - mesh + friction])
-        row1 = -mesh + t_fp / rbp
-        row2 = t_fp / rbp + t_fg / rbg
+            t_fp, t_fg, f_fp, f_fg = self.friction_actions(s, q, qd, omega_pinion, xp, part)
+            actions = {"a_p": t_fp / rbp, "a_g": t_fg / rbg}
+            if self.bearings is not None:
+                actions |= {"x_p": f_fp, "x_g": f_fg}
+            _apply(out, rows, actions)
         if take_constant:
-            input_force = self.torque_pinion_Nm / rbp
-            output = self.torque_gear_Nm / rbg + reaction
-            spring = self.spring_stiffness_N_per_m * (q[1] + u_static) + self.spring_damping_Ns_per_m * qd[1]
-            row1 = row1 + input_force
-            row2 = row2 + input_force - output - spring
-        return xp.stack([row1, row2])
+            _apply(out, rows, {lay.input_body: self.torque_pinion_Nm / rbp})
+            if lay.eliminated is not None:  # the output torque through the Schur projection ("torques")
+                _apply(out, rows, {lay.output_body: -self.torque_gear_Nm / rbg})
+            else:  # on u, the output body's own coordinate: the torque, the soft spring
+                u = lay.index("u")
+                out[u] = _add(out[u], -(self.torque_gear_Nm / rbg + reaction))
+                out[u] = _add(out[u], -(self.spring_stiffness_N_per_m * (q[u] + u_static)
+                                        + self.spring_damping_Ns_per_m * qd[u]))
+            for name, force in self.support_forces(q, qd).items():  # bearings, shafts: own coordinates
+                i = lay.index(name)
+                out[i] = _add(out[i], -force)
+        zero = 0.0 * s
+        return xp.stack([zero if row is None else row + zero for row in out])
+
+    def support_forces(self, q, qd) -> dict:
+        """Forces of the bearings and shafts on their own coordinates [N] (total, static load
+        included): ``k y + c y'`` per translation (``k_py (y_p - N/k_py) = k_py y_p - N``, ``k_gy y_g
+        + N``, OLOA without static load) and, per shaft twist, ``(k_t t + c_t t')/R^2 + N``
+        (``k_t/R^2`` the shaft's stiffness at the base radius ``R`` of its gear). Empty when rigid."""
+        lay, out, n = self.layout, {}, self.normal_load_N
+        if self.bearings is not None:
+            static = (-n, 0.0, n, 0.0)
+            for name, k, c, f in zip(("y_p", "x_p", "y_g", "x_g"), self.bearings.stiffnesses,
+                                     self.bearings.dampings, static):
+                i = lay.index(name)
+                out[name] = k * q[i] + c * qd[i] + f
+        if self.shafts is not None:
+            sh = self.shafts
+            c_d, c_l = sh.torsional_damping(self.inertia_pinion_kgm2, self.inertia_gear_kgm2)
+            for name, k, c, radius in (("t_d", sh.stiffness_drive_Nm_per_rad, c_d, self.base_radius_pinion_m),
+                                       ("t_l", sh.stiffness_load_Nm_per_rad, c_l, self.base_radius_gear_m)):
+                i = lay.index(name)
+                out[name] = (k * q[i] + c * qd[i]) / radius**2 + n
+        return out
+
+    def bearing_forces(self, q, qd) -> dict:
+        """Dynamic bearing forces ``k y + c y'`` [N] (static load included: the mean along the LOA
+        is ``-<F_mesh>`` on the pinion, ``+<F_mesh>`` on the gear), keyed ``pinion_loa``,
+        ``pinion_oloa``, ``gear_loa``, ``gear_oloa``; empty with rigid bearings."""
+        forces = self.support_forces(q, qd)
+        names = {"y_p": "pinion_loa", "x_p": "pinion_oloa", "y_g": "gear_loa", "x_g": "gear_oloa"}
+        return {label: forces[name] for name, label in names.items() if name in forces}
+
+    def support_losses(self, qd) -> dict:
+        """Instantaneous damper powers [W] ``c v^2`` of the bearings (``"bearings"``) and shafts
+        (``"shafts"``, ``c_t/R^2 t'^2``), summed over each group; empty when rigid."""
+        lay, out = self.layout, {}
+        if self.bearings is not None:
+            terms = [c * qd[lay.index(name)] ** 2 for name, c in zip(("y_p", "x_p", "y_g", "x_g"),
+                                                                    self.bearings.dampings)]
+            out["bearings"] = terms[0] + terms[1] + terms[2] + terms[3]
+        if self.shafts is not None:
+            c_d, c_l = self.shafts.torsional_damping(self.inertia_pinion_kgm2, self.inertia_gear_kgm2)
+            out["shafts"] = (c_d / self.base_radius_pinion_m**2 * qd[lay.index("t_d")] ** 2
+                             + c_l / self.base_radius_gear_m**2 * qd[lay.index("t_l")] ** 2)
+        return out
 
     def lti_step_forcing(self, s, xp=np):
         """``G(s) = c (D(s) - <D>)`` on the DTE row [N s] for LTI, else ``None`` (``D = N/k(s)``
@@ -506,10 +705,10 @@ class GearPairModel:
         closed = self._closed_form_windup(omega_pinion, xp)
         if closed is not None:
             return delta, closed
-        q = xp.stack([delta, 0.0 * s])
+        q = xp.stack([delta] + [0.0 * s] * (self.ndof - 1))
         force = self.generalized_force(s, q, 0.0 * q, omega_pinion, "all", 0.0, 0.0, xp)
-        # remove the spring's own term (q[1] = 0, qd = 0 -> it is zero) and average
-        return delta, xp.sum(w * force[1]) / self.spring_stiffness_N_per_m
+        # remove the spring's own term (u = 0, u' = 0 -> it is zero) and average
+        return delta, xp.sum(w * force[self.layout.index("u")]) / self.spring_stiffness_N_per_m
 
     def static_windup(self, omega_pinion, xp=np):
         """The soft spring's wind-up ``u_s`` [m] of :meth:`static_state` alone: zero unless
@@ -549,7 +748,7 @@ class GearPairModel:
         name = self.friction.name
         if name not in ("arctan", "coulomb", "none") or not self.mesh.equal_shares:
             return None
-        if name == "none":
+        if name == "none" or (self.coupling == "LTI" and self.lti_friction == "damping"):
             return 0.0 * omega_pinion
         wp, wg, _ = self.speeds(omega_pinion)
         # the three pieces on the last axis, (slot, from, to, load share): two pairs until
@@ -586,3 +785,43 @@ class GearPairModel:
 
             piece = self.friction.mu0 * xp.sign(slope) * (arm_integral(upper) - 2.0 * arm_integral(s0) + arm_integral(lower))
         return xp.sum(share * self.normal_load_N * xp.where(moving, piece, 0.0), axis=-1)
+
+
+# -- the assembly's arithmetic: structural zeros skipped, unit factors exact ---------------------
+def _is_zero(c) -> bool:
+    return isinstance(c, float) and c == 0.0
+
+
+def _scaled(value, c):
+    """``c value``, or ``None`` for a structural zero (``c`` a Python 0.0); +-1 exactly."""
+    if isinstance(c, float):
+        if c == 0.0:
+            return None
+        if c == 1.0:
+            return value
+        if c == -1.0:
+            return -value
+    return c * value
+
+
+def _add(row, term):
+    return term if row is None else row + term
+
+
+def _apply(out, rows, forces: dict) -> None:
+    """``out += P^T f`` for physical forces ``f`` (name -> array), in the order given."""
+    for name, force in forces.items():
+        for j, c in enumerate(rows[name]):
+            term = _scaled(force, c)
+            if term is not None:
+                out[j] = _add(out[j], term)
+
+
+def _combine(row, values):
+    """``sum_j P_ij values[j]`` for one row of ``P`` (a physical rate from the generalised ones)."""
+    total = None
+    for j, c in enumerate(row):
+        term = _scaled(values[j], c)
+        if term is not None:
+            total = _add(total, term)
+    return total

@@ -21,18 +21,26 @@ import numpy as np
 from ..engine.response import FrequencyResponse, solution_multipliers
 from ..engine.response import frequency_response as engine_frequency_response
 from .model import GearPairModel
-from .readouts import order_amplitudes
+from .readouts import BEARING_FORCES, bearing_keys, bearing_weights, order_amplitudes
 from .resonance import ResonanceRanges, iso6336_resonance
 from .solve import PeriodicSolution, auto_harmonics, rad_s_to_rpm, read_outs, solve_periodic, start_guess
 from .system import GearSystem
 
-__all__ = ["COLUMNS", "DEFAULT_ORDERS", "FLOQUET_COLUMNS", "FLOQUET_POINTS", "ORDER_KEY_COLUMNS",
+__all__ = ["BEARING_COLUMNS", "COLUMNS", "DEFAULT_ORDERS", "columns", "FLOQUET_COLUMNS", "FLOQUET_POINTS", "ORDER_KEY_COLUMNS",
            "PD_AUTO_MAX_UNKNOWNS", "GearFrequencyResponse", "frequency_response", "order_column", "period_doubling_rule",
            "solve", "unstable_zones"]
 
 #: Columns of ``frc.csv`` (and of :meth:`GearFrequencyResponse.table`), in order.
 COLUMNS = ("speed_rpm", "mesh_freq_hz", "dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor",
            "max_abs_floquet", "stable", "nu", "residual")
+
+#: Columns ``frc.csv`` gains on bearings (INTERFACE.md "Bearings"): the RMS of each bearing force.
+BEARING_COLUMNS = bearing_keys(("rms",))
+
+
+def columns(model: GearPairModel) -> tuple:
+    """The ``frc.csv`` columns of `model`: :data:`COLUMNS`, then :data:`BEARING_COLUMNS` on bearings."""
+    return COLUMNS + (BEARING_COLUMNS if model.bearings is not None else ())
 
 #: Columns of ``floquet.csv``: one row per multiplier of every ``nu = 1`` point, ``row`` the
 #: point's data row in ``frc.csv`` (0 = first), multipliers over the base period, largest first.
@@ -208,11 +216,17 @@ class GearFrequencyResponse:
         """One record per located -1 crossing (speeds in rpm; the ``nu = 2`` branch's rows in the table)."""
         return _pd_records(self)
 
+    @property
+    def columns(self) -> tuple:
+        """The ``frc.csv`` columns of this curve (:func:`columns`)."""
+        return columns(self.model)
+
     def rows(self) -> list[dict]:
         """The ``frc.csv`` rows as dicts (``stable`` and ``nu`` as integers; ``stable`` NaN where unknown)."""
         out = []
+        cols = self.columns
         for i in range(len(self)):
-            row = {k: float(self.table[k][i]) for k in COLUMNS}
+            row = {k: float(self.table[k][i]) for k in cols}
             row["nu"] = int(row["nu"])
             if not math.isnan(row["stable"]):
                 row["stable"] = int(row["stable"])
@@ -262,14 +276,35 @@ class GearFrequencyResponse:
                       for hb, z in parts if len(z)]
         return np.concatenate(amplitudes) if amplitudes else np.zeros((0, len(orders)))
 
+    def bearing_order_amplitudes_N(self, orders=None) -> dict:
+        """Each bearing force's amplitude [N] at the mesh orders (default :meth:`mesh_orders`) of every
+        row: name -> ``(rows, orders)`` (one :func:`~hbgear.gear.readouts.order_amplitudes` call per
+        force, ``w.q + v.q'``); empty with rigid bearings."""
+        orders = self.mesh_orders() if orders is None else np.asarray(orders, dtype=float)
+        r, out = self.response, {}
+        parts = [(r.hb, r.branch.z, r.branch.p)] + [(d.hb, d.z, d.p) for d in r.doubled]
+        for name, (w, v, _) in bearing_weights(self.model).items():
+            amplitudes = [order_amplitudes(hb.decode(r.system, z)[0], hb.nu, orders, w, v,
+                                           np.asarray(p) * self.model.teeth_pinion / hb.nu)
+                          for hb, z, p in parts if len(z)]
+            out[name] = np.concatenate(amplitudes) if amplitudes else np.zeros((0, len(orders)))
+        return out
+
     def order_rows(self, orders=None) -> tuple[list[str], list[list]]:
         """``orders.csv``: the header (:data:`ORDER_KEY_COLUMNS`, then :func:`order_column` of each
-        order) and one row per ``frc.csv`` row, in its order."""
+        order; on bearings then each bearing force's orders, ``bearing_force_<gear>_<direction>_order_<r>_N``)
+        and one row per ``frc.csv`` row, in its order."""
         orders = self.mesh_orders() if orders is None else np.asarray(orders, dtype=float)
         amplitudes = self.order_amplitudes_um(orders)
+        header = [*ORDER_KEY_COLUMNS, *(order_column(o) for o in orders)]
+        bearing = self.bearing_order_amplitudes_N(orders)
+        for name in BEARING_FORCES:
+            if name in bearing:
+                amplitudes = np.concatenate([amplitudes, bearing[name]], axis=1)
+                header += [order_column(o, f"bearing_force_{name}", "N") for o in orders]
         speed, freq, nu = self.speed_rpm, self.mesh_freq_hz, self.nu
         rows = [[i, float(speed[i]), float(freq[i]), int(nu[i]), *amplitudes[i].tolist()] for i in range(len(self))]
-        return [*ORDER_KEY_COLUMNS, *(order_column(o) for o in orders)], rows
+        return header, rows
 
     def floquet_points(self, limit: int = FLOQUET_POINTS) -> list[dict]:
         """The points of the ``nu`` branch whose multipliers ``floquet.png`` shows: at most `limit`
@@ -341,14 +376,21 @@ def unstable_zones(model: GearPairModel, omegas, subdivisions: int = 6) -> list[
     return [_zone_in_rpm(z) for z in scan(GearSystem(model), omegas, subdivisions)]
 
 
+#: The read-outs among the ``frc.csv`` columns (only these are evaluated for a curve).
+_READ_OUT_COLUMNS = ("dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor")
+
+
 def _table(model, p, zs, hb, max_abs, stable, nu, residual, speed_rpm=None) -> dict:
-    """The frc.csv columns of a set of points (read-outs batched)."""
-    read = read_outs(model, p, zs, hb)
+    """The frc.csv columns of a set of points (read-outs batched, only those of the columns)."""
+    supports = bearing_keys() + ("mean_bearing_loss_W",) if model.bearings is not None else ()
+    read = read_outs(model, p, zs, hb, keys=_READ_OUT_COLUMNS + supports)
     speed = rad_s_to_rpm(np.asarray(p, dtype=float)) if speed_rpm is None else speed_rpm
     return {"speed_rpm": np.asarray(speed, dtype=float), "mesh_freq_hz": np.asarray(p) * model.teeth_pinion / (2 * math.pi),
-            **{k: read[k] for k in ("dte_mean_um", "dte_rms_um", "dte_p2p_um", "dynamic_factor")},
+            **read,
             "max_abs_floquet": np.asarray(max_abs, dtype=float), "stable": np.asarray(stable, dtype=float),
-            "nu": np.full(len(p), nu, dtype=float), "residual": np.asarray(residual, dtype=float)}
+            "nu": np.full(len(p), nu, dtype=float), "residual": np.asarray(residual, dtype=float),
+            **{k: read[k] for k in read if k.startswith("bearing_force_")},
+            **{k: read[k] for k in ("mean_bearing_loss_W",) if k in read}}
 
 
 def _pd_records(curve: GearFrequencyResponse) -> list[dict]:
@@ -432,7 +474,7 @@ def frequency_response(model: GearPairModel, omega_start: float, omega_stop: flo
     parts = [_table(model, b.p, b.z, response.hb, response.max_abs_floquet, response.stable, nu, b.residual, speed)]
     for d, stab in zip(response.doubled, response.doubled_stability):
         parts.append(_table(model, d.p, d.z, d.hb, stab.max_abs, stab.stable, 2, d.residual))
-    table = {k: np.concatenate([t[k] for t in parts]) for k in COLUMNS}
+    table = {k: np.concatenate([t[k] for t in parts]) for k in parts[0]}
     if not stability:
         zones_rule = "not scanned (stability off)"
     elif model.is_linear and len(b) > 1:

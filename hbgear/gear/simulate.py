@@ -253,7 +253,7 @@ def _deflate_soft_mode(model, omega, u_static, node_s, node_w, node_y, y_end, tm
     ``F_2 = T_p/R_bp + T_fp/R_bp + T_fg/R_bg``. The cycle means of ``u`` and ``u'`` minus these
     values estimate the soft mode's displacement and velocity at mid-cycle (its period is many
     mesh cycles); they are propagated half a cycle to the end with the mode's frequency
-    ``w_s = sqrt(k_u / (m_p + m_g))`` and subtracted. Only the state is changed, never the
+    ``w_s = sqrt(k_u / M_uu)`` (``M_uu = m_p + m_g`` without shafts) and subtracted. Only the state is changed, never the
     equations, and a cycle that ends steady is not corrected, so the read-out period is a
     genuine trajectory.
     """
@@ -267,7 +267,7 @@ def _deflate_soft_mode(model, omega, u_static, node_s, node_w, node_y, y_end, tm
     mean_f2 = float(np.sum(node_w * force[1])) + k_u * (mean_u + u_static) + c_u * mean_ud
     target_u = mean_f2 / k_u - u_static
     du, dv = mean_u - target_u, mean_ud
-    ws2 = k_u / float(model.mass_pinion_kg + model.mass_gear_kg)
+    ws2 = k_u / float(model.rigid_mass_kg)
     half = 0.5 * tm
     y = y_end.copy()
     y[1] -= du + dv * half
@@ -297,7 +297,7 @@ def _reaction_update(model, omega, node_s, node_w, node_y, y_end, reaction, tm):
     """
     ndof = model.ndof
     mean_f2 = _output_force_mean(model, omega, node_s, node_w, node_y)
-    drift = tm * (mean_f2 - reaction) / float(model.mass_pinion_kg + model.mass_gear_kg)
+    drift = tm * (mean_f2 - reaction) / float(model.rigid_mass_kg)
     y = y_end.copy()
     y[1] -= float(np.sum(node_w * node_y[1]))
     y[ndof + 1] -= float(np.sum(node_w * node_y[ndof + 1])) + 0.5 * drift
@@ -312,7 +312,7 @@ def _initial_reaction(model, omega):
 
     s, w = mesh_period_rule(model.breakpoint_candidates(), 4)
     delta, _ = model.static_state(omega)
-    q = np.stack([np.asarray(delta), 0.0 * np.asarray(s)])
+    q = np.stack([np.asarray(delta)] + [0.0 * np.asarray(s)] * (model.ndof - 1))
     return _output_force_mean(model, omega, np.asarray(s), np.asarray(w), np.concatenate([q, 0.0 * q]))
 
 

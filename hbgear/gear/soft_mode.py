@@ -40,7 +40,7 @@ def soft_mode_estimate(model, omega_pinion, nu: int = 1) -> np.ndarray:
     omega = np.asarray(omega_pinion, dtype=float)
     if model.boundary != "spring":
         return np.zeros(omega.shape + (0,), dtype=complex)
-    w_b = np.sqrt(float(model.spring_stiffness_N_per_m) / float(model.mass_pinion_kg + model.mass_gear_kg))
+    w_b = np.sqrt(float(model.spring_stiffness_N_per_m) / float(model.rigid_mass_kg))
     period = 2.0 * np.pi * nu / (float(model.teeth_pinion) * omega)
     return np.exp(np.multiply.outer(w_b * period, np.array([1j, -1j])))
 

@@ -22,9 +22,9 @@ from ..errors import ConvergenceError
 from ..engine.hb import HarmonicBalance, _breakpoint_key
 from ..engine.response import PeriodicSolution as EnginePeriodicSolution
 from ..engine.response import newton_solve, synthesize
-from .readouts import SUMMARY_KEYS, periodic_summary
+from .readouts import bearing_coefficients, periodic_summary, summary_keys
 from .model import GearPairModel
-from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis
+from ..engine.quadrature import LatticeRule, lattice_rule, lattice_synthesis, mesh_period_rule
 from .system import GearSystem
 
 __all__ = ["PeriodicSolution", "solve_periodic", "start_guess", "read_outs", "auto_harmonics", "rpm_to_rad_s", "rad_s_to_rpm"]
@@ -80,7 +80,7 @@ class PeriodicSolution(EnginePeriodicSolution):
         """The INTERFACE read-outs (µm, W) from exact quadrature over the period; with the Floquet
         multipliers, also ``max_abs_floquet``."""
         out = _summaries(self.model, np.array([self.omega_pinion]), self.coefficients[None], self.harmonics, self.nu,
-                         np.array([self.u_static_m]), np.array([self.reaction_force_N]))
+                         np.array([self.u_static_m]), np.array([self.reaction_force_N]), samples=self.samples)
         out = {k: float(v[0]) for k, v in out.items()}
         if self.multipliers is not None:
             m = np.asarray(self.multipliers)
@@ -93,6 +93,19 @@ class PeriodicSolution(EnginePeriodicSolution):
         return cls(system=GearSystem(model), parameter=float(omega_pinion), harmonics=hb.harmonics, nu=hb.nu,
                    samples=hb.samples, z=np.asarray(z), residual_norm=float(residual_norm), iterations=int(iterations),
                    multipliers=multipliers, u_static_m=float(model.static_windup(omega_pinion)))
+
+    def bearing_harmonic_table(self) -> tuple[list[str], list[list]]:
+        """``harmonics.csv`` on bearings: the DTE columns of :meth:`harmonic_table` and, per bearing
+        force, its amplitude [N] at each order (the mean at order 0). **Returns:** ``(header, rows)``."""
+        header = ["mesh_order", "dte_amplitude_um", "dte_phase_deg"]
+        rows = [list(r) for r in self.harmonic_table()]
+        base = self.model.speeds(self.omega_pinion)[2] / self.nu
+        for name, force in bearing_coefficients(self.model, self.coefficients[None], np.array([base])).items():
+            mean, amp, _ = fourier.harmonic_amplitudes(force[0], self.harmonics)
+            header.append(f"bearing_force_{name}_amplitude_N")
+            for k, row in enumerate(rows):
+                row.append(float(mean) if k == 0 else float(amp[k - 1]))
+        return header, rows
 
     def harmonic_table(self):
         """Rows ``(order, amplitude_um, phase_deg)`` of the DTE; order in mesh orders (0.5 steps for nu=2)."""
@@ -111,21 +124,68 @@ def _decode(model: GearPairModel, z, hb: HarmonicBalance):
 _synthesize = synthesize
 
 
-def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction) -> dict:
+def _summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, keys=None,
+               samples=None) -> dict:
     """:func:`~hbgear.gear.readouts.periodic_summary` of ``P`` solutions at once (exact quadrature over
     the period, the DTE peak-to-peak also on a dense grid): `coefficients` ``(P, ndof, 2H+1)``
-    [m], `omegas`, `u_static`, `reaction` ``(P,)``. **Returns:** arrays ``(P,)``."""
+    [m], `omegas`, `u_static`, `reaction` ``(P,)``; `keys` as there; `samples`: the solutions'
+    AFT samples (where the friction loads jump at contact events, :func:`_event_split_summaries`).
+    **Returns:** arrays ``(P,)``."""
+    keys = summary_keys(model) if keys is None else tuple(keys)
     omega = np.asarray(omegas, dtype=float)[:, None]
     _, s, w, basis = _read_out_rule(_breakpoint_key(GearSystem(model), omega[0, 0]), harmonics, nu)
     base_frequency = model.speeds(omega)[2][:, :, None] / nu  # (P, 1, 1)
     q, qd = _node_states(coefficients, base_frequency, basis, nu)
     out = periodic_summary(model, omega, s[None], np.moveaxis(q, 1, 0), np.moveaxis(qd, 1, 0), w,
-                           np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None])
-    # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
-    dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
-    out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
-    out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients, harmonics, nu)
+                           np.asarray(u_static, dtype=float)[:, None], np.asarray(reaction, dtype=float)[:, None],
+                           keys=keys)
+    if "dte_p2p_um" in out:  # the peak-to-peak between the nodes too: the DTE on 16 H uniform points (FFT)
+        dense = fourier.synthesize(np.asarray(coefficients, dtype=float)[:, 0], harmonics, 16 * harmonics)
+        out["dte_p2p_um"] = np.maximum(out["dte_p2p_um"], 1e6 * np.ptp(dense, axis=-1))
+    for name, force in bearing_coefficients(model, coefficients, base_frequency[:, 0, 0]).items():  # likewise
+        key = f"bearing_force_{name}_p2p_N"
+        if key in out:
+            out[key] = np.maximum(out[key], np.ptp(fourier.synthesize(force, harmonics, 16 * harmonics), axis=-1))
+    if model.contact_events(np.zeros(1), np.zeros((model.ndof, 1)), 0.0) is not None:
+        split = _event_split_summaries(model, omega[:, 0], coefficients, harmonics, nu, u_static, reaction, samples,
+                                       keys)
+        for key in keys:  # extremes: the larger of both rules; integrals: the split rule's
+            out[key] = (np.maximum(out[key], split[key]) if key == "dynamic_factor" or key.endswith("_p2p_N")
+                        else out[key] if key == "dte_p2p_um" else split[key])
+    if "mean_mesh_power_W" in out:
+        out["mean_mesh_power_W"] = out["mean_mesh_power_W"] - _impulse_power(model, omega[:, 0], coefficients,
+                                                                             harmonics, nu)
     return out
+
+
+def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static, reaction, samples=None,
+                           keys=None) -> dict:
+    """The summaries point by point with the quadrature also split at the contact events.
+
+    Where the friction loads jump at a flank's contact (:meth:`GearPairModel.contact_events`) the
+    instants move with the solution: they are located as the harmonic balance does
+    (:func:`hbgear.engine.events.crossings`) and added to the breakpoints of a base-period rule,
+    so the read-outs integrate smooth pieces only. **Returns:** arrays ``(P,)``.
+    """
+    from ..engine.events import crossings_compiled
+
+    keys = summary_keys(model) if keys is None else tuple(keys)
+    system = GearSystem(model)
+    samples = samples or max(1024, 4 * harmonics * nu + 2)
+    phases = np.asarray(model.phase_breakpoints(), dtype=float)
+    fixed = np.concatenate([(phases + j) / nu for j in range(nu)])
+    rows = []
+    for omega, xc, u_s, r in zip(omegas, np.asarray(coefficients, dtype=float), u_static, reaction):
+        base_frequency = float(model.speeds(float(omega))[2]) / nu
+        vc = xc @ fourier.derivative_matrix(harmonics, base_frequency).T
+        t, valid = (np.asarray(a) for a in crossings_compiled(system, float(omega), xc, vc,
+                                                               nu, samples))
+        base, w = mesh_period_rule(np.concatenate([fixed, t[valid]]), 2 * harmonics + 8)
+        tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
+        q, qd = _synthesize(xc, base_frequency, np.cos(tau), np.sin(tau))
+        rows.append(periodic_summary(model, float(omega), (base * nu) % 1.0, q, qd, w, float(u_s), float(r),
+                                     keys=keys))
+    return {key: np.array([float(row[key]) for row in rows]) for key in keys}
 
 
 def _impulse_power(model, omegas, coefficients, harmonics, nu):
@@ -163,16 +223,17 @@ def _node_states(coefficients, base_frequency, basis, nu: int):
 READ_OUT_BATCH = 512
 
 
-def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance) -> dict:
+def read_outs(model: GearPairModel, omegas, zs, hb: HarmonicBalance, keys=None) -> dict:
     """``PeriodicSolution.from_z(model, w, z, hb).summary()`` for every point ``(omegas[i],
-    zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary."""
+    zs[i])`` at once (a curve's read-outs): a dict of arrays ``(P,)`` keyed as the summary
+    (`keys`: only those, see :func:`~hbgear.gear.readouts.periodic_summary`)."""
     omegas = np.asarray(omegas, dtype=float)
     coefficients, reaction = _decode(model, zs, hb)
     u_static = np.broadcast_to(np.asarray(model.static_windup(omegas), dtype=float), omegas.shape)
     parts = [_summaries(model, omegas[k:k + READ_OUT_BATCH], coefficients[k:k + READ_OUT_BATCH], hb.harmonics,
-                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH])
+                        hb.nu, u_static[k:k + READ_OUT_BATCH], reaction[k:k + READ_OUT_BATCH], keys, hb.samples)
              for k in range(0, len(omegas), READ_OUT_BATCH)]
-    return {key: np.concatenate([part[key] for part in parts]) for key in SUMMARY_KEYS}
+    return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
 
 #: From this many harmonics on the read-outs synthesise a solution at the quadrature nodes by

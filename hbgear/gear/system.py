@@ -54,11 +54,13 @@ class GearSystem(PeriodicSystem):
         In a speed sweep they come from ``k(t)``, ``c(t)`` and, for formulation B with a linear
         friction part (LTV without backlash: ``sigma_j F_mesh``), the nominal friction factors:
         those depend on the speed only through a law with a velocity scale (arctan,
-        Kelley--Lemanski).
+        Kelley--Lemanski). LTI's energy-equivalent friction damping depends on the speed.
         """
         if self.parameter != "speed":
             return False
         m = self.model
+        if m.coupling == "LTI" and m.lti_friction != "excitation":
+            return False  # the energy-equivalent damping follows the speed
         friction_in_coefficients = m.friction_has_linear_part and m.formulation == "B"
         return not friction_in_coefficients or m.friction.name in ("none", "coulomb")
 
@@ -75,7 +77,8 @@ class GearSystem(PeriodicSystem):
         if self.parameter != "speed":
             return False
         m = self.model
-        return not m.friction_has_linear_part or m.friction.name in ("none", "coulomb")
+        excitation = m.friction_has_linear_part and not (m.coupling == "LTI" and m.lti_friction == "damping")
+        return not excitation or m.friction.name in ("none", "coulomb")
 
     @property
     def nonlinear_force_uses_displacement(self) -> bool:
@@ -149,6 +152,11 @@ class GearSystem(PeriodicSystem):
         """LTI: the stiffness-jump impulses of ``c d_st'`` (:meth:`GearPairModel.lti_step_forcing`)."""
         model, _ = self._at(p)
         return model.lti_step_forcing(s, xp)
+
+    def event_functions(self, s, q, qd, p, xp=np):
+        """Backlash with friction: the flank contacts ``x -+ b`` (:meth:`GearPairModel.contact_events`)."""
+        model, omega = self._at(p)
+        return model.contact_events(s, q, omega, xp)
 
     def force(self, s, q, qd, p, part, extra, xp=np):
         model, omega = self._at(p)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["frc_figure", "orders_figure", "dynamic_factor_figure", "floquet_figure", "system_curve_figure",
+           "bearing_forces_figure", "campbell_figure",
            "timeseries_figure", "validation_figure", "stability_map_figure", "static_te_figure", "harris_figure",
            "study_figure", "CONTOUR_MARGIN", "ORDER_MAP_RANGE_DB"]
 
@@ -249,6 +250,81 @@ def dynamic_factor_figure(curve, resonance, title: str | None = None):
     ax.legend(fontsize=7, loc="best")
     fig.suptitle(title or f"dynamic factor: peak {factor[peak]:.3g} at {speed[peak]:.0f} rpm "
                  f"(N = {speed[peak] / resonance.n_E1_rpm:.3f})", fontsize=10)
+    return fig
+
+
+def bearing_forces_figure(curve, title: str | None = None, modes=None):
+    """RMS of the dynamic bearing forces ``k y + c y'`` of a gear curve on bearings against speed:
+    LOA (solid) and OLOA (dashed), pinion (blue) and gear (orange); the ``nu`` branch only, unstable
+    points red. With `modes` (:class:`~hbgear.gear.modes.Modes`) the speeds where mesh order 1 meets
+    each natural frequency are marked on the top edge."""
+    n, speed = curve.points, curve.speed_rpm[:curve.points]
+    fig = _figure(figsize=(8, 4.5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.11, top=0.83)
+    for end, colour in (("pinion", "tab:blue"), ("gear", "tab:orange")):
+        for direction, style in (("loa", "-"), ("oloa", "--")):
+            values = curve.table[f"bearing_force_{end}_{direction}_rms_N"][:n]
+            ax.plot(speed, values, style, color=colour, lw=1.1, label=f"{end} {direction.upper()}")
+            bad = curve.stable[:n] == 0
+            if np.any(bad):
+                ax.plot(speed[bad], values[bad], "o", ms=2.5, color="tab:red")
+    ax.set_yscale("log")
+    ax.set_xlim(float(speed.min()), float(speed.max()))
+    if modes is not None:
+        for f, name in zip(modes.frequencies_hz, modes.names):
+            rpm = 60.0 * f / float(curve.model.teeth_pinion)
+            if speed.min() <= rpm <= speed.max():
+                ax.axvline(rpm, color="0.6", lw=0.7, ls=":")
+                ax.text(rpm, 1.0, name, transform=ax.get_xaxis_transform(), rotation=90, fontsize=6, va="top",
+                        ha="right", color="0.35")
+    _mesh_frequency_axis(ax, float(curve.model.teeth_pinion))
+    ax.set_xlabel("pinion speed [rpm]")
+    ax.set_ylabel("bearing force RMS about the mean [N]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(title or "dynamic bearing forces along (LOA) and across (OLOA) the line of action", fontsize=10)
+    return fig
+
+
+def campbell_figure(modes, model, speed_rpm_range, orders: int = 10, title: str | None = None):
+    """Campbell diagram: mesh orders ``r = 1..orders`` as lines ``f = r Z_p n / 60`` against pinion
+    speed, the natural frequencies of the mean-stiffness model (:class:`~hbgear.gear.modes.Modes`)
+    as horizontal lines named by their dominant element, and their crossings in the speed range
+    marked (where a resonance on the curve is to be expected)."""
+    lo, hi = sorted(float(v) for v in speed_rpm_range)
+    zp = float(model.teeth_pinion)
+    fig = _figure(figsize=(8, 5))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.1, right=0.8, bottom=0.1, top=0.92)
+    n = np.linspace(0.0, hi, 2)
+    top = orders * zp * hi / 60.0
+    shown = [f for f in modes.frequencies_hz if f <= top]
+    f_max = 1.1 * max([zp * hi / 60.0 * min(orders, 3)] + shown)
+    for r in range(1, orders + 1):
+        ax.plot(n, r * zp * n / 60.0, color="0.5", lw=0.8)
+        x_end = min(hi, 60.0 * f_max / (r * zp))
+        ax.text(x_end, r * zp * x_end / 60.0, f" {r}", fontsize=7, color="0.3", va="bottom")
+    label_y = -np.inf
+    for f, name in sorted(zip(modes.frequencies_hz, modes.names)):
+        if f > f_max:
+            continue
+        ax.axhline(f, color="tab:blue", lw=1.0)
+        label_y = max(f, label_y + 0.035 * f_max)  # labels kept apart, in frequency order
+        ax.annotate(f"{name} {f:.0f} Hz", (1.0, f), xycoords=ax.get_yaxis_transform(), xytext=(1.01, label_y),
+                    textcoords=ax.get_yaxis_transform(), fontsize=6.5, va="center", color="tab:blue",
+                    arrowprops=dict(arrowstyle="-", color="tab:blue", lw=0.5))
+        speeds = 60.0 * f / (np.arange(1, orders + 1) * zp)
+        inside = (speeds >= lo) & (speeds <= hi)
+        ax.plot(speeds[inside], np.full(int(inside.sum()), f), "o", ms=4, color="tab:red")
+    ax.axvspan(lo, hi, color="0.93", zorder=0)
+    ax.set_xlim(0.0, hi)
+    ax.set_ylim(0.0, f_max)
+    ax.set_xlabel("pinion speed [rpm]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.grid(alpha=0.3)
+    fig.suptitle(title or "Campbell diagram: mesh orders (grey) and natural frequencies at mean mesh stiffness "
+                 "(crossings in the sweep red)", fontsize=9)
     return fig
 
 

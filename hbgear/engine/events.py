@@ -1,0 +1,251 @@
+r"""Jumps of the nonlinear force at state-dependent instants (contact loss and regain).
+
+A system may declare ``event_functions(s, q, qd, p, xp)``: scalar functions ``e_r`` of the
+state across whose zeros ``Q_nl`` may jump (e.g. a friction load that exists only while two
+surfaces touch). Sampled uniformly, such a jump aliases at ``O(1/N)`` like a jump at a known
+phase, but its instant moves with the solution. Here, from the Fourier coefficients of the state:
+
+1. the zeros of each ``e_r(t)`` over the base period are bracketed by the sign changes on the
+   ``N`` AFT samples and, for a short excursion between two samples that carries no sign change
+   (the birth of a contact loss), by the extremum of ``e_r`` between them where its value there
+   has the other sign; they are located by Newton steps safeguarded by bisection in the bracket
+   on the trigonometric polynomial (the state at any ``t`` is exact), so ``t_c`` is smooth in the coefficients and a
+   pulse shrinks to nothing continuously;
+2. the jump ``J_c = Q_nl(t_c + eps) - Q_nl(t_c - eps)`` (``eps`` = :data:`SIDE`) is measured;
+3. ``J_c (B_hat_c - P B_c)`` is added to the projection, ``B_c(t) = 1/2 - frac(t - t_c)`` the unit
+   sawtooth (exact coefficients ``B_hat_c``, ``P B_c`` those of its samples), as for the
+   breakpoints in :meth:`hbgear.engine.hb.HarmonicBalance._sample_points`.
+
+The corrected projection is continuous in the coefficients (a sample crossing ``t_c`` changes
+``P Q_nl`` and ``J_c P B_c`` alike) and errs at ``O(1/N^2)``; its derivative (through ``t_c`` and
+``J_c``) from ``2 ndof`` directional derivatives of the per-zero contributions
+(:func:`jump_jacobian`). At most :data:`MAX_CROSSINGS` sign changes and
+:data:`MAX_EXCURSIONS` excursions per function and base period are corrected (the first in time);
+more stay ``O(1/N)``.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import fourier
+
+__all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "declared", "crossings", "crossings_compiled",
+           "jump_correction", "jump_jacobian", "state_at"]
+
+#: Sign changes located per event function and base period.
+MAX_CROSSINGS = 8
+#: Excursions between two samples (two zeros each) located per event function and base period.
+MAX_EXCURSIONS = 2
+#: Half-width of the base-period interval across which a jump is measured.
+SIDE = 1e-10
+_NEWTON_STEPS = 6
+_BRACKET_STEPS = 16
+
+
+def declared(system, p) -> bool:
+    """True when the system declares event functions (probed at one dummy state; in a trace the
+    probe costs nothing, its result is unused)."""
+    zero = jnp.zeros((system.ndof, 1))
+    return system.event_functions(jnp.zeros(1), zero, zero, p, jnp) is not None
+
+
+def state_at(xc, vc, t):
+    """``(q, q')`` at base fractions `t` (flat, shape ``(m,)``) from real coefficients
+    `xc`, `vc` ``(ndof, 2H+1)``: shapes ``(ndof, m)``."""
+    k = jnp.arange(1, (xc.shape[-1] - 1) // 2 + 1)
+    angle = 2 * np.pi * t[None] * k[:, None]  # (H, m)
+    basis = jnp.concatenate([jnp.ones_like(t)[None], jnp.stack([jnp.cos(angle), jnp.sin(angle)], axis=1).reshape(-1, t.shape[0])])
+    return xc @ basis, vc @ basis
+
+
+def _own_events(system, p, xc, vc, nu, t):
+    """Event function ``r`` at the base fractions ``t[r]``: `t` ``(E, K)`` -> ``(E, K)``."""
+    count = t.shape[0]
+    q, qd = state_at(xc, vc, t.ravel())
+    values = jnp.reshape(system.event_functions(jnp.mod(t.ravel() * nu, 1.0), q, qd, p, jnp), (count, count, -1))
+    rows = jnp.arange(count)
+    return values[rows, rows]
+
+
+def _newton(f, t, lo, hi):
+    """Newton steps for ``f(t) = 0`` (elementwise), clipped to ``[lo, hi]`` (the extremum search)."""
+    for _ in range(_NEWTON_STEPS):
+        value, slope = jax.jvp(f, (t,), (jnp.ones_like(t),))
+        t = jnp.clip(t - value / jnp.where(slope != 0, slope, 1.0), lo, hi)
+    return t
+
+
+def _bracketed_zero(f, t, lo, hi):
+    """The zero of ``f`` in ``[lo, hi]`` (``f(lo)``, ``f(hi)`` of opposite signs), elementwise:
+    Newton steps that fall outside the shrinking bracket are replaced by bisection, so a zero
+    just outside the bracket cannot capture the iteration."""
+    f_lo = f(lo)
+    for _ in range(_BRACKET_STEPS):
+        value, slope = jax.jvp(f, (t,), (jnp.ones_like(t),))
+        low_side = (value > 0) == (f_lo > 0)
+        lo, hi = jnp.where(low_side, t, lo), jnp.where(low_side, hi, t)
+        f_lo = jnp.where(low_side, value, f_lo)
+        step = t - value / jnp.where(slope != 0, slope, 1.0)
+        t = jnp.where((step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
+    return t
+
+
+def crossings(system, p, xc, vc, nu: int, samples: int):
+    """Zeros of the system's event functions over one base period.
+
+    **Arguments:** `xc`, `vc`: real coefficients of ``q`` and ``q'``, shape ``(ndof, 2H+1)``;
+    `nu`: mesh periods per base period; `samples`: the AFT samples ``N`` that bracket the zeros.
+
+    **Returns:** ``(t, valid)``, shapes ``(E, K)`` (``K = MAX_CROSSINGS + 2 MAX_EXCURSIONS``):
+    base fractions in [0, 1] of the zeros of each function and which entries are zeros (the rest
+    padding); ``None`` when the system declares no event functions.
+    """
+    grid = jnp.arange(samples) / samples
+    harmonics = (xc.shape[-1] - 1) // 2
+    q = fourier.synthesize(jax.lax.stop_gradient(xc), harmonics, samples, jnp)
+    qd = fourier.synthesize(jax.lax.stop_gradient(vc), harmonics, samples, jnp)
+    values = system.event_functions(jnp.mod(grid * nu, 1.0), q, qd, p, jnp)
+    if values is None:
+        return None
+    e = jax.lax.stop_gradient(jnp.reshape(values, (-1, samples)))
+    after, before = jnp.roll(e, -1, axis=1), jnp.roll(e, 1, axis=1)
+    positive = e > 0
+
+    def first(mask, size):
+        index = jax.vmap(lambda row: jnp.nonzero(row, size=size, fill_value=-1)[0])(mask)
+        return jnp.where(index >= 0, index, 0), index >= 0
+
+    # sign changes between samples i and i+1
+    i, valid = first(positive != (after > 0), MAX_CROSSINGS)
+    e0, e1 = jnp.take_along_axis(e, i, axis=1), jnp.take_along_axis(after, i, axis=1)
+    lo, hi = i / samples, (i + 1) / samples
+    step = jnp.where(e0 != e1, e0 - e1, 1.0)
+    t = jnp.clip(lo + jnp.clip(e0 / step, 0.0, 1.0) / samples, lo, hi)
+
+    # excursions: a sample that is an extremum of its neighbours, all three of one sign
+    rising, falling = e - before, after - e
+    same = (positive == (before > 0)) & (positive == (after > 0))
+    j, candidate = first(same & (rising * falling < 0), MAX_EXCURSIONS)
+    ext_lo, ext_hi = (j - 1) / samples, (j + 1) / samples
+    slope_of = lambda tt: jax.jvp(lambda u: _own_events(system, p, xc, vc, nu, u), (tt,), (jnp.ones_like(tt),))[1]  # noqa: E731
+    peak = jax.lax.stop_gradient(_newton(slope_of, j / samples, ext_lo, ext_hi))
+    flips = (_own_events(system, p, xc, vc, nu, peak) > 0) != jnp.take_along_axis(positive, j, axis=1)
+    excursion = candidate & jax.lax.stop_gradient(flips)
+
+    def guess(a, b):  # the zero between a and b by linear interpolation of e
+        fa, fb = _own_events(system, p, xc, vc, nu, a), _own_events(system, p, xc, vc, nu, b)
+        ratio = jax.lax.stop_gradient(jnp.clip(fa / jnp.where(fa != fb, fa - fb, 1.0), 0.0, 1.0))
+        return a + ratio * (b - a)
+
+    lo = jnp.concatenate([lo, ext_lo, peak], axis=1)
+    hi = jnp.concatenate([hi, peak, ext_hi], axis=1)
+    t = jnp.concatenate([t, guess(ext_lo, peak), guess(peak, ext_hi)], axis=1)
+    t = _bracketed_zero(lambda u: _own_events(system, p, xc, vc, nu, u), jax.lax.stop_gradient(t), lo, hi)
+    return t, jnp.concatenate([valid, excursion, excursion], axis=1)
+
+
+@partial(jax.jit, static_argnums=(4, 5))
+def crossings_compiled(system, p, xc, vc, nu: int, samples: int):
+    """:func:`crossings` compiled (the system a pytree argument), for read-outs point by point."""
+    return crossings(system, p, xc, vc, nu, samples)
+
+
+def _sampled_sawtooth_projection(t, harmonics: int, samples: int):
+    """``P B_c`` of the sawtooths with unit jumps at base fractions `t` ``(C,)``: ``(C, 2H+1)``.
+
+    Between sample instants the samples ``1/2 - frac(t_i - t_c)`` grow with ``t_c`` at slope 1,
+    so ``d(P B_c)/dt_c`` is the unit mean: given explicitly, forward-mode derivatives skip the FFT.
+    """
+    fixed = jax.lax.stop_gradient(t)
+    sawtooth = 0.5 - jnp.mod(jnp.arange(samples)[None] / samples - fixed[:, None], 1.0)
+    mean = jnp.zeros(2 * harmonics + 1).at[0].set(1.0)
+    return fourier.project(sawtooth, harmonics, jnp) + (t - fixed)[:, None] * mean[None]
+
+
+def _basis(t, harmonics: int):
+    """Real basis rows ``[1, cos 2 pi k t, sin 2 pi k t, ...]`` at base fractions `t` ``(C,)``: ``(C, 2H+1)``."""
+    angle = 2 * np.pi * t[:, None] * jnp.arange(1, harmonics + 1)[None]
+    return jnp.concatenate([jnp.ones_like(t)[:, None], jnp.stack([jnp.cos(angle), jnp.sin(angle)], axis=-1)
+                            .reshape(t.shape[0], 2 * harmonics)], axis=1)
+
+
+def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics: int, nu: int, samples: int):
+    """``J_c (B_hat_c - P B_c)`` per zero, shape ``(C, ndof, 2H+1)``, for the state shifted near
+    each zero by ``shift_q``, ``shift_v`` ``(ndof, E, K)`` (zero: the solution itself).
+
+    The zero is moved by one Newton step on the shifted state from its located value, which
+    carries the implicit derivative ``dt_c = -de / e'``; the jump is measured across it.
+    """
+    t0, valid = located
+    count = t0.shape[0]
+
+    def own(t):
+        q, qd = state_at(xc, vc, t.ravel())
+        q, qd = q + shift_q.reshape(q.shape), qd + shift_v.reshape(qd.shape)
+        values = jnp.reshape(system.event_functions(jnp.mod(t.ravel() * nu, 1.0), q, qd, p, jnp), (count, count, -1))
+        rows = jnp.arange(count)
+        return values[rows, rows]
+
+    value, slope = jax.jvp(own, (t0,), (jnp.ones_like(t0),))
+    t = (t0 - jnp.where(valid, value / jnp.where(slope != 0, slope, 1.0), 0.0)).ravel()
+    sides = jnp.concatenate([t + SIDE, t - SIDE])
+    q, qd = state_at(xc, vc, sides)
+    q = q + jnp.tile(shift_q.reshape(q.shape[0], -1), 2)
+    qd = qd + jnp.tile(shift_v.reshape(qd.shape[0], -1), 2)
+    force = system.force(jnp.mod(sides * nu, 1.0), q, qd, p, "nonlinear", extra, jnp)
+    size = t.shape[0]
+    jump = jnp.where(valid.ravel()[None], force[:, :size] - force[:, size:], 0.0)  # (ndof, C)
+    k = jnp.arange(1, harmonics + 1)
+    angle = 2 * np.pi * t[:, None] * k[None]
+    exact = jnp.concatenate([jnp.zeros((size, 1)), jnp.stack([-jnp.sin(angle) / (np.pi * k), jnp.cos(angle) / (np.pi * k)],
+                                                             axis=-1).reshape(size, 2 * harmonics)], axis=1)
+    return jump.T[:, :, None] * (exact - _sampled_sawtooth_projection(t, harmonics, samples))[:, None]
+
+
+def jump_correction(system, p, extra, xc, vc, harmonics: int, nu: int, samples: int):
+    """``sum_c J_c (B_hat_c - P B_c)``: real coefficients ``(ndof, 2H+1)`` to add to the projection
+    of ``Q_nl`` for its jumps at the zeros of the event functions (zero without any)."""
+    located = crossings(system, p, xc, vc, nu, samples)
+    if located is None:
+        return jnp.zeros(xc.shape)
+    located = jax.lax.stop_gradient(located)
+    shift = jnp.zeros((xc.shape[0],) + located[0].shape)
+    return jnp.sum(_contributions(system, p, extra, xc, vc, located, shift, shift, harmonics, nu, samples), axis=0)
+
+
+def jump_jacobian(system, p, extra, xc, vc, harmonics: int, nu: int, samples: int):
+    """Derivatives of :func:`jump_correction` with respect to the coefficients of ``q`` and of
+    ``q'``: two arrays ``(ndof, ndof, 2H+1, 2H+1)`` (row coordinate, column coordinate, row
+    coefficient, column coefficient), or ``None`` without event functions.
+
+    The correction depends on the coefficients only through the state near each zero
+    (``x(t) = x @ basis(t)``, the same shift over the ``2 SIDE`` of a jump), so each block is
+    ``sum_c dC_c/d(state_j) basis(t_c)``: ``2 ndof`` directional derivatives of the per-zero
+    contributions instead of one per coefficient.
+    """
+    located = crossings(system, p, xc, vc, nu, samples)
+    if located is None:
+        return None
+    located = jax.lax.stop_gradient(located)
+    n = xc.shape[0]
+    zero = jnp.zeros((n,) + located[0].shape)
+    basis = _basis(located[0].ravel(), harmonics)  # (C, 2H+1)
+
+    def contributions(shift_q, shift_v):
+        return _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics, nu, samples)
+
+    blocks = []
+    for which in (0, 1):
+        columns = []
+        for j in range(n):
+            unit = zero.at[j].set(1.0)
+            tangent = (unit, zero) if which == 0 else (zero, unit)
+            d = jax.jvp(contributions, (zero, zero), tangent)[1]  # (C, ndof, 2H+1)
+            columns.append(jnp.einsum("cib,cd->ibd", d, basis))
+        blocks.append(jnp.stack(columns, axis=1))  # (ndof_row, ndof_col, 2H+1, 2H+1)
+    return blocks[0], blocks[1]
