@@ -160,6 +160,10 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
+    if coupling == "LTI" and mesh.stiffness_model != "rectangular":
+        # LTI's excitation is the loaded static TE; per pair its deflection D(s) varies between the
+        # breakpoints, whose damping term c dD/dt time integration does not carry (only its jumps)
+        raise ConfigError("friction.model", "LTI", "'LTV' or 'NLTV' with a per-pair stiffness_model")
     if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
     if coupling != "LTI" and fr.lti_friction != "excitation":

@@ -200,6 +200,7 @@ def test_relief_with_the_rectangular_model_exits_2(tmp_path, capsys):
 @pytest.mark.parametrize("setting, key", [
     ("profile.gear_tip_relief_length_mm=50.0", "profile.gear_tip_relief_length_mm"),  # longer than the path
     ("mesh.damping_model='constant'", "mesh.damping_model"),  # per pair: c k_j / k_mean only
+    ("friction.model='LTI'", "friction.model"),  # LTI's c dD/dt with a varying D(s): not wired
 ])
 def test_dynamic_commands_refuse_bad_tooth_contact_in_one_line(tmp_path, capsys, command, setting, key):
     """The dynamic commands take the per-pair contact (MODEL.md section 9) and check it as static-te does."""

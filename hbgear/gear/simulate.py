@@ -380,6 +380,9 @@ class _Integrator:
             samples_per_cycle = int(max(256, 2 ** math.ceil(math.log2(24.0 * ratio))))
         self.grid_s = np.arange(samples_per_cycle) / samples_per_cycle
         self.plan = _segment_plan(breakpoints, node_s, self.grid_s)
+        if model.coupling == "LTI" and not model.mesh.equal_shares:
+            raise ValueError("time integration of LTI applies c dD/dt of the loaded static TE as kicks at its jumps "
+                             "only: a per-pair mesh whose static deflection D(s) varies between them needs LTV or NLTV")
         self.kicks = [model.lti_damping_impulse(a, omega) for a, _, _, _ in self.plan]
         self.kick_dv = [minv @ k if np.any(k) else None for k in self.kicks]
 
