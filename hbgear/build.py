@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .config import PAIR_DAMPING
 from .errors import ConfigError
 from .gear.contact import (
     Iso6336PairStiffness,
@@ -130,21 +131,26 @@ def _k_min(cfg, geometry: GearPair, contact_ratio: float | None = None) -> float
     return k_min
 
 
-def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, float]:
+def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, float | None]:
     """The physics checks of a run config for the dynamic model that need the geometry but no JAX
     (so a bad input ends at once, before anything heavy is imported): the contact ratio in (1, 2),
-    a mean stiffness giving ``0 < k_min <= k_max``, the stiffness model, the
-    coupling/formulation/boundary/backlash combinations, the Kelley-Lemanski roughness limit.
+    a mean stiffness giving ``0 < k_min <= k_max`` (rectangular), or the per-pair tooth contact
+    (:func:`build_tooth_contact`: the table, the reliefs against the path of contact, the bores;
+    proportional damping), the coupling/formulation/boundary/backlash combinations, the
+    Kelley-Lemanski roughness limit.
 
-    **Returns:** ``(geometry, k_min [N/m])``. **Raises:** :class:`~hbgear.errors.ConfigError`.
+    **Returns:** ``(geometry, k_min [N/m])``, ``k_min = None`` for a per-pair model.
+    **Raises:** :class:`~hbgear.errors.ConfigError`.
     """
     mesh, fr = cfg.mesh, cfg.friction
-    if mesh.stiffness_model != "rectangular":
-        raise ConfigError("mesh.stiffness_model", mesh.stiffness_model,
-                          "'rectangular' for the dynamic commands: per-pair contact is not in the dynamic model yet "
-                          "(hbgear static-te takes every model)")
     geometry = build_geometry(cfg.gear, contact_ratio)
-    k_min = _k_min(cfg, geometry, contact_ratio)
+    if mesh.stiffness_model == "rectangular":
+        k_min = _k_min(cfg, geometry, contact_ratio)
+    else:
+        if mesh.damping_model != "proportional":
+            raise ConfigError("mesh.damping_model", mesh.damping_model, PAIR_DAMPING)
+        build_tooth_contact(cfg, geometry=geometry)
+        k_min = None
     if fr.law == "kelley-lemanski" and fr.roughness_um > ROUGHNESS_MAX_UM:
         # C_R = 50/(50 - S) is held at S = 45 uin (C_R = 10) as a guard: above it the law would be
         # silently clipped, so such a roughness is refused instead
@@ -154,6 +160,10 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     if coupling == "LTI" and formulation == "B":
         raise ConfigError("friction.formulation", "B", "'A' with model 'LTI' (LTI uses quasi-static loads)")
+    if coupling == "LTI" and mesh.stiffness_model != "rectangular":
+        # LTI's excitation is the loaded static TE; per pair its deflection D(s) varies between the
+        # breakpoints, whose damping term c dD/dt time integration does not carry (only its jumps)
+        raise ConfigError("friction.model", "LTI", "'LTV' or 'NLTV' with a per-pair stiffness_model")
     if coupling == "LTI" and mesh.backlash_m > 0:
         raise ConfigError("mesh.backlash_um", mesh.backlash_m * 1e6, "0 with model 'LTI' (LTI is linear)")
     if coupling != "LTI" and fr.lti_friction != "excitation":
@@ -169,7 +179,9 @@ def check_config(cfg, contact_ratio: float | None = None) -> tuple[GearPair, flo
 
 
 def build_model(cfg, contact_ratio: float | None = None):
-    """The gear-pair model of a run config (SI throughout); :func:`check_config` first."""
+    """The gear-pair model of a run config (SI throughout); :func:`check_config` first. A per-pair
+    ``stiffness_model`` gives the model a :class:`~hbgear.gear.mesh.PairContactMesh`
+    (:func:`_with_pair_contact`)."""
     from .gear.model import GearPairModel
 
     geometry, k_min = check_config(cfg, contact_ratio)
@@ -182,7 +194,7 @@ def build_model(cfg, contact_ratio: float | None = None):
         law = law.regularized(fr.regularization_m_per_s)
     coupling, formulation, boundary = fr.model, fr.formulation, cfg.boundary.output
     contact = "backlash" if mesh.backlash_m > 0 else "linear"
-    return GearPairModel(
+    model = GearPairModel(
         teeth_pinion=float(geometry.teeth_pinion),
         teeth_gear=float(geometry.teeth_gear),
         base_radius_pinion_m=geometry.base_radius_pinion_m,
@@ -193,8 +205,8 @@ def build_model(cfg, contact_ratio: float | None = None):
         contact_ratio=gamma,
         inertia_pinion_kgm2=cfg.gear.inertia_pinion_kgm2,
         inertia_gear_kgm2=cfg.gear.inertia_gear_kgm2,
-        k_max_N_per_m=mesh.k_max_N_per_m,
-        k_min_N_per_m=k_min,
+        k_max_N_per_m=mesh.k_max_N_per_m if k_min is not None else math.nan,
+        k_min_N_per_m=k_min if k_min is not None else math.nan,
         damping_ratio=mesh.damping_ratio,
         backlash_m=mesh.backlash_m,
         ste_amplitude_m=np.asarray(mesh.ste_amplitude_m, dtype=float),
@@ -213,6 +225,19 @@ def build_model(cfg, contact_ratio: float | None = None):
         bearings=build_bearings(cfg),
         shafts=build_shafts(cfg),
     )
+    return model if k_min is not None else _with_pair_contact(model, build_tooth_contact(cfg, geometry=geometry))
+
+
+def _with_pair_contact(model, contact: ToothContact):
+    """`model` with the per-pair mesh of `contact` (MODEL.md section 9); its ``k_max``, ``k_min``
+    fields become the extremes of ``k(s) = sum_j k_pair(xi_j)`` over the mesh period (information)."""
+    from .engine.quadrature import mesh_period_rule
+    from .gear.mesh import PairContactMesh
+
+    mesh = PairContactMesh.build(contact.pair_stiffness, contact.modification, model)
+    s, _ = mesh_period_rule(mesh.phase_breakpoints(model), 64)
+    k = mesh.stiffness(model, np.concatenate([s, mesh.phase_breakpoints(model)]))
+    return model.replace(mesh=mesh, k_max_N_per_m=float(np.max(k)), k_min_N_per_m=float(np.min(k)))
 
 
 def build_bearings(cfg):

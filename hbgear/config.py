@@ -65,6 +65,10 @@ BOUNDARY_OUTPUTS = ("torques", "spring", "reaction")
 STIFFNESS_MODELS = ("rectangular", "pair_table", "iso6336", "potential_energy")
 PROFILE_SHAPES = ("linear", "parabolic")
 
+#: What a per-pair `stiffness_model` allows for [mesh] damping_model (MODEL.md section 9).
+PAIR_DAMPING = ("'proportional' (the default) with a per-pair stiffness_model: each pair's damper is "
+                "c k_j / k_mean (MODEL.md section 9)")
+
 #: The [mesh] stiffness keys each `stiffness_model` takes (any other one of them is an error).
 MODEL_KEYS = {
     "rectangular": ("k_max_MN_per_m", "k_mean_MN_per_m", "k_min_MN_per_m"),
@@ -156,7 +160,8 @@ class MeshConfig:
     "potential_energy": `youngs_modulus_Pa` [Pa] (both gears), `rack_dedendum_coefficient`
     ``h_fP/m`` [-] of the basic rack, and `blank_factor` ``C_R`` [-] (iso6336), or
     `poisson_ratio` [-] and `rack_tip_radius_coefficient` ``rho_fP/m`` [-] (potential_energy);
-    `damping_ratio` [-]; `damping_model` ("constant" or "proportional" to k(t)); `backlash_m`
+    `damping_ratio` [-]; `damping_model` ("constant" or "proportional" to k(t); a per-pair
+    model damps each pair in proportion to its stiffness, "proportional", its default); `backlash_m`
     [m] (total); `ste_amplitude_m` [m] and `ste_phase_rad` [rad], one entry per mesh order 1, 2.
     Defaults of the material and rack: steel (206 GPa, 0.3) and the ISO 53 profile A rack
     (``h_fP = 1.25 m``, ``rho_fP = 0.38 m``); solid blanks (``C_R = 1``).
@@ -898,6 +903,7 @@ def _mesh_post(s: _Section, kw: dict[str, Any]) -> dict[str, Any]:
     if model == "pair_table":
         s.get("pair_stiffness_file", _file)  # the "required" message when absent
     if model != "rectangular":
+        kw.setdefault("damping_model", "proportional")  # the dynamic commands refuse another one
         return kw
     s.get("k_max_MN_per_m", _STIFFNESS)  # the "required" message when absent
     other = s.exclusive("k_mean_MN_per_m", "k_min_MN_per_m", required=True)

@@ -222,10 +222,13 @@ def test_bad_model_values(mesh):
     assert error_of(edit(ISO, mesh=mesh)).key == f"mesh.{next(iter(mesh))}"
 
 
-def test_dynamic_model_needs_the_rectangular_stiffness():
-    with pytest.raises(ConfigError) as info:
-        build_model(parse_config(ISO))
-    assert info.value.key == "mesh.stiffness_model" and "static-te" in info.value.allowed
+def test_dynamic_model_takes_the_per_pair_stiffness():
+    """A per-pair stiffness model builds the per-pair mesh (proportional damping, its own k_mean)."""
+    from hbgear.gear.mesh import PairContactMesh
+
+    model = build_model(parse_config(ISO))
+    assert isinstance(model.mesh, PairContactMesh) and model.damping_model == "proportional"
+    assert model.k_min_N_per_m < model.k_mean_N_per_m < model.k_max_N_per_m
 
 
 # ----------------------------------------------------------------------------- pair table

@@ -196,10 +196,28 @@ def test_relief_with_the_rectangular_model_exits_2(tmp_path, capsys):
     assert status == 2 and err.startswith("hbgear: error: profile.gear_tip_relief_um = 5.0") and "'rectangular'" in err
 
 
-def test_dynamic_commands_refuse_the_iso_example(tmp_path, capsys):
-    status = cli.main(["solve", str(ISO_EXAMPLE), "--speed", "3000", "--out", str(tmp_path / "o")])
+@pytest.mark.parametrize("command", ["solve", "frc", "simulate", "stability-map"])
+@pytest.mark.parametrize("setting, key", [
+    ("profile.gear_tip_relief_length_mm=50.0", "profile.gear_tip_relief_length_mm"),  # longer than the path
+    ("mesh.damping_model='constant'", "mesh.damping_model"),  # per pair: c k_j / k_mean only
+    ("friction.model='LTI'", "friction.model"),  # LTI's c dD/dt with a varying D(s): not wired
+])
+def test_dynamic_commands_refuse_bad_tooth_contact_in_one_line(tmp_path, capsys, command, setting, key):
+    """The dynamic commands take the per-pair contact (MODEL.md section 9) and check it as static-te does."""
+    argv = [command, str(ISO_EXAMPLE), "--set", setting, "--out", str(tmp_path / "o")]
+    argv += {"solve": ["--speed", "3000"], "simulate": ["--speed", "3000"]}.get(command, [])
+    status = cli.main(argv)
+    captured = capsys.readouterr()
+    assert status == 2 and captured.err.startswith(f"hbgear: error: {key}") and captured.err.count("\n") == 1
+    assert "Traceback" not in captured.err and not (tmp_path / "o").exists()
+
+
+def test_dynamic_commands_refuse_a_bad_pair_table(tmp_path, capsys):
+    length, _ = path_mm()
+    config = write_table_config(tmp_path, [(0.0, 300.0), (0.5 * length, -5.0), (length, 300.0)])
+    status = cli.main(["frc", str(config), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
-    assert status == 2 and err.startswith("hbgear: error: mesh.stiffness_model = 'iso6336'") and err.count("\n") == 1
+    assert status == 2 and err.startswith("hbgear: error: ") and err.count("\n") == 1 and "Traceback" not in err
 
 
 # ----------------------------------------------------------------------------- a light --help

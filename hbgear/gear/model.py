@@ -19,8 +19,9 @@ symmetric)::
     [m_p   m_p + m_g] [u''    ] = [ T_p/R_bp + T_fp/R_bp + T_fg/R_bg - T_g/R_bg - k_u (u+u_s) - c_u u' ]
 
 and for ``delta`` alone ``m_e delta'' = N - F_mesh + m_e (T_fp/(R_bp m_p) - T_fg/(R_bg m_g))``,
-``N = T_p / R_bp``, ``1/m_e = 1/m_p + 1/m_g``. The mesh force is
-``F_mesh = k(t) g(delta - eps) + c(t) (delta' - eps')`` and the friction torques
+``N = T_p / R_bp``, ``1/m_e = 1/m_p + 1/m_g``. The mesh force comes from the model's ``mesh``
+(:mod:`hbgear.gear.mesh`): the paper's ``F_mesh = k(t) g(delta - eps) + c(t) (delta' - eps')``, or
+per-pair contact ``F_mesh = sum_j F_j`` (MODEL.md section 9); the friction torques are
 ``T_fp = -sum_j mu_j N_j xi_p,j``, ``T_fg = +sum_j mu_j N_j xi_g,j`` (MODEL.md section 3).
 
 The generalised force is split into a part that is affine in ``(q, q')`` with periodic
@@ -43,13 +44,11 @@ from jax.tree_util import register_dataclass
 
 from .dofs import Bearings, Shafts, dof_layout
 from .friction import FrictionLaw
+from .mesh import PAIR_SLOTS, PairContact, RectangularMesh
 
 jax.config.update("jax_enable_x64", True)  # hbgear computes in float64 (see hbgear.engine)
 
 __all__ = ["GearPairModel", "PAIR_SLOTS"]
-
-#: Pair slots tracked in a mesh period; enough for any contact ratio below 2.
-PAIR_SLOTS = 2
 
 COUPLINGS = ("LTI", "LTV", "NLTV")
 FORMULATIONS = ("A", "B")
@@ -72,7 +71,8 @@ class GearPairModel:
     - `contact_start_m`: ``x_A`` [m]; `base_pitch_m`: ``p_b`` [m];
       `line_of_action_m`: ``L`` [m]; `contact_ratio`: ``Gamma`` [-].
     - `inertia_pinion_kgm2`, `inertia_gear_kgm2`: ``J_p``, ``J_g`` [kg m^2].
-    - `k_max_N_per_m`, `k_min_N_per_m`: mesh stiffness in double / single contact [N/m].
+    - `k_max_N_per_m`, `k_min_N_per_m`: mesh stiffness in double / single contact [N/m] (the
+      rectangular mesh's; with per-pair contact only for information: the extremes of ``k(s)``).
     - `damping_ratio`: mesh damping ratio ``zeta`` [-], ``c = 2 zeta sqrt(k_mean m_e)``.
     - `backlash_m`: total backlash ``2b`` [m] (used when `contact` is ``"backlash"``).
     - `ste_amplitude_m`, `ste_phase_rad`: unloaded static transmission error per mesh order.
@@ -95,6 +95,9 @@ class GearPairModel:
       `lti_friction` (LTI only): the friction as the Fourier excitation of the nominal friction
       torques (``"excitation"``, Eq. 10), as the energy-equivalent viscous damper at the mesh
       (``"damping"``, :meth:`lti_friction_damping_Ns_per_m`) or both (``"both"``).
+    - `mesh`: the tooth mesh (:mod:`hbgear.gear.mesh`): :class:`~hbgear.gear.mesh.RectangularMesh`
+      (default, the paper's) or :class:`~hbgear.gear.mesh.PairContactMesh` (per-pair contact, which
+      damps each pair in proportion to its stiffness: `damping_model` must be ``"proportional"``).
     """
 
     teeth_pinion: float
@@ -126,6 +129,7 @@ class GearPairModel:
     damping_model: str = field(default="constant", metadata=dict(static=True))
     contact: str = field(default="linear", metadata=dict(static=True))
     normal_loads: str = field(default="compressive", metadata=dict(static=True))
+    mesh: Any = RectangularMesh()
     lti_friction: str = field(default="excitation", metadata=dict(static=True))
 
     def __post_init__(self):
@@ -150,6 +154,9 @@ class GearPairModel:
                 raise ValueError("contact 'backlash' needs coupling 'LTV' or 'NLTV', not 'LTI' (LTI is linear)")
         elif isinstance(self.coupling, str) and isinstance(self.lti_friction, str) and self.lti_friction != "excitation":
             raise ValueError(f"lti_friction {self.lti_friction!r} needs coupling 'LTI', not {self.coupling!r}")
+        if getattr(self.mesh, "per_pair", False) is True and self.damping_model == "constant":
+            raise ValueError("per-pair contact damps each pair as c k_j/k_mean (MODEL.md section 9): "
+                             "damping_model must be 'proportional'")
 
     def replace(self, **changes) -> GearPairModel:
         return replace(self, **changes)
@@ -166,9 +173,9 @@ class GearPairModel:
 
     @property
     def k_mean_N_per_m(self):
-        """``k_mean = k_max (Gamma - 1) + k_min (2 - Gamma)`` [N/m]."""
-        g = self.contact_ratio
-        return self.k_max_N_per_m * (g - 1.0) + self.k_min_N_per_m * (2.0 - g)
+        """Mean mesh stiffness [N/m]: ``k_max (Gamma - 1) + k_min (2 - Gamma)`` (rectangular), the
+        mesh-period mean of ``sum_j k_pair(xi_j)`` (per-pair contact)."""
+        return self.mesh.k_mean(self)
 
     @property
     def mass_pinion_kg(self):
@@ -298,15 +305,12 @@ class GearPairModel:
         return xi_p, xi_g, in_contact, sigma
 
     def mesh_stiffness(self, s, xp=np):
-        """Rectangular-pulse ``k(s)`` (Eq. 14) [N/m]."""
-        return xp.where(s < self.contact_ratio - 1.0, self.k_max_N_per_m, self.k_min_N_per_m)
+        """``k(s)`` [N/m]: the rectangular pulse (Eq. 14), or ``sum_j k_pair(xi_j)`` over the path."""
+        return self.mesh.stiffness(self, s, xp)
 
     def mesh_damping(self, s, xp=np):
         """``c(s)`` [N s/m]: constant, or proportional to ``k(s)``."""
-        c = self.mesh_damping_Ns_per_m
-        if self.damping_model == "proportional":
-            return c * self.mesh_stiffness(s, xp) / self.k_mean_N_per_m
-        return c + 0.0 * s
+        return self.mesh.damping(self, s, xp)
 
     def static_transmission_error(self, s, omega_mesh, xp=np):
         """Unloaded STE ``eps = sum_n A_n cos(2 pi n s + phi_n)`` [m] and ``eps'`` [m/s]."""
@@ -322,18 +326,19 @@ class GearPairModel:
         return eps, deps
 
     def loaded_static_transmission_error(self, s, omega_mesh, xp=np):
-        """Loaded STE fluctuation ``eps + N/k(s) - <N/k>`` [m] (LTI excitation, Eq. 10)."""
+        """Loaded STE fluctuation ``eps + D(s) - <D>`` [m] (LTI excitation, Eq. 10), ``D`` the
+        static deflection of the mesh (``N/k(s)`` for the rectangular one)."""
         eps, _ = self.static_transmission_error(s, omega_mesh, xp)
-        g = self.contact_ratio
-        mean_compliance = (g - 1.0) / self.k_max_N_per_m + (2.0 - g) / self.k_min_N_per_m
-        return eps + self.normal_load_N * (1.0 / self.mesh_stiffness(s, xp) - mean_compliance)
+        return eps + self.normal_load_N * self.mesh.compliance_fluctuation(self, s, xp)
 
-    def contact_function(self, x, xp=np):
-        """``g(x)``: identity, or the backlash dead zone of half-width ``b`` [m]."""
-        if self.contact == "linear":
-            return x
-        b = 0.5 * self.backlash_m
-        return xp.where(x > b, x - b, xp.where(x < -b, x + b, 0.0 * x))
+    def static_dte(self, s, omega_pinion, xp=np):
+        """The loaded static TE ``delta_s = eps + D(s)`` [m] (plus half the backlash: the drive flank
+        carries the load) at phases `s`; ``D = N/k(s)`` (rectangular) or the per-pair static contact."""
+        eps, _ = self.static_transmission_error(s, self.speeds(omega_pinion)[2], xp)
+        delta = eps + self.mesh.static_deflection(self, s, xp)
+        if self.contact == "backlash":
+            delta = delta + 0.5 * self.backlash_m
+        return delta
 
     # -- velocities, forces ---------------------------------------------------------------------
     def angular_velocities(self, qd, omega_pinion, nominal: bool):
@@ -368,7 +373,8 @@ class GearPairModel:
         return qd[lay.index("x_p")] - qd[lay.index("x_g")]
 
     def mesh_force(self, s, q, qd, omega_pinion, xp=np):
-        """``F_mesh = k g(delta - eps) + c (delta' - eps')`` [N] (LTI: ``k_mean``, loaded STE)."""
+        """``F_mesh`` [N] of the mesh at ``x = delta - eps``, ``x' = delta' - eps'`` (rectangular:
+        ``k g(x) + c x'``; LTI: ``k_mean``, loaded STE)."""
         _, _, wm = self.speeds(omega_pinion)
         if self.coupling == "LTI":
             # Eq. 10: k_mean (delta - d_st) + c (delta' - d_st'), d_st the loaded STE fluctuation;
@@ -379,71 +385,64 @@ class GearPairModel:
             dst = self.loaded_static_transmission_error(s, wm, xp)
             return self.k_mean_N_per_m * (q[0] - dst) + self.mesh_damping_Ns_per_m * (qd[0] - deps)
         eps, deps = self.static_transmission_error(s, wm, xp)
-        return self.mesh_stiffness(s, xp) * self.contact_function(q[0] - eps, xp) + self.mesh_damping(s, xp) * (
-            qd[0] - deps
-        )
+        return self.mesh.force(self, s, q[0] - eps, qd[0] - deps, wm, xp)
 
-    def contact_flanks(self, s, q, omega_pinion, xp=np):
-        """``(drive, back)``: 1.0 where the drive / back flank is in contact, else 0.0.
-
-        Without backlash the drive flank always (bilateral contact: the teeth never separate); with
-        backlash ``2b`` the drive flank while ``x = delta - eps > b``, the back flank while ``x < -b``
-        (MODEL.md sections 4, 11). Shape of ``q[0]``.
-        """
-        if self.contact == "linear":
-            one = 1.0 + 0.0 * q[0]
-            return one, 0.0 * one
+    def pair_contact(self, s, q, qd, omega_pinion, xp=np) -> PairContact:
+        """Per-pair contact forces ``F_j`` [N] and flank flags of the mesh
+        (:class:`~hbgear.gear.mesh.PairContact`, shapes ``(PAIR_SLOTS,) + s.shape``): ``sigma_j F_mesh``
+        and the dead zone's flanks (rectangular), or each pair's own contact (per-pair)."""
         _, _, wm = self.speeds(omega_pinion)
-        eps, _ = self.static_transmission_error(s, wm, xp)
-        x = q[0] - eps
-        b = 0.5 * self.backlash_m
-        return xp.where(x > b, 1.0, 0.0), xp.where(x < -b, 1.0, 0.0)
+        eps, deps = self.static_transmission_error(s, wm, xp)
+        return self.mesh.pairs(self, s, q[0] - eps, qd[0] - deps, wm, xp)
 
     def contact_events(self, s, q, omega_pinion, xp=np):
-        """``(x - b, x + b)`` [m], shape ``(2,) + q[0].shape``, where the contact gate of the friction
-        loads jumps (backlash with friction and ``normal_loads = "compressive"``), else ``None``.
+        """Functions of ``x = delta - eps`` whose zeros are where the contact gate of the friction
+        loads (and, per pair, of the pair dampers) jumps, shape ``(E,) + q[0].shape``, else ``None``.
 
-        Formulation A's load ``sigma_j N`` switches on and off at ``x = b``; formulation B's
-        ``sigma_j max(+-F_mesh, 0)`` jumps where a flank closes with ``F_mesh = c x' != 0``.
+        Rectangular with backlash, friction and ``normal_loads = "compressive"``: ``(x - b, x + b)``
+        -- formulation A's load ``sigma_j N`` switches on and off at ``x = b``; formulation B's
+        ``sigma_j max(+-F_mesh, 0)`` jumps where a flank closes with ``F_mesh = c x' != 0``. Per-pair
+        contact that may open: every pair's flanks (:meth:`~hbgear.gear.mesh.PairContactMesh.contact_events`),
+        where its damper force jumps, whatever the friction.
         """
-        if self.contact != "backlash" or self.normal_loads != "compressive" or self.friction.name == "none":
+        per_pair = getattr(self.mesh, "per_pair", False)
+        if not per_pair and (self.normal_loads != "compressive" or self.friction.name == "none"):
             return None
         _, _, wm = self.speeds(omega_pinion)
         eps, _ = self.static_transmission_error(s, wm, xp)
-        x = q[0] - eps
-        b = 0.5 * self.backlash_m
-        return xp.stack([x - b, x + b])
+        return self.mesh.contact_events(self, s, q[0] - eps, xp)
 
-    def friction_loads(self, s, q, qd, omega_pinion, sigma, xp=np):
+    def friction_loads(self, s, q, qd, omega_pinion, quasi_static, xp=np):
         """Normal loads ``N_j >= 0`` of the pairs [N] and their part in the linear split.
 
-        MODEL.md section 11 (``normal_loads = "compressive"``): LTI ``sigma_j N``; formulation A
-        ``sigma_j N`` while the drive flank is in contact, else 0; formulation B without backlash
-        ``sigma_j |F_mesh|`` (a negative ``F_mesh`` is carried by the back flank), with backlash
-        ``sigma_j max(F_mesh, 0)`` while ``x > b``, ``sigma_j max(-F_mesh, 0)`` while ``x < -b``, 0 in
-        the dead zone. ``"signed"``: ``sigma_j N`` (A) or ``sigma_j F_mesh`` (B) at all times.
+        `quasi_static`: the quasi-static pair loads ``N_j,s`` of the mesh (``sigma_j N``; per-pair
+        contact: the static contact's loads). MODEL.md section 11 (``normal_loads = "compressive"``),
+        with ``F_j`` and the flanks of :meth:`pair_contact`: LTI ``N_j,s``; formulation A ``N_j,s``
+        while pair ``j``'s drive flank is in contact, else 0 (always, where the pairs cannot
+        separate: no backlash and, per pair, no relief); formulation B where the pairs cannot
+        separate ``|F_j|`` (a negative ``F_j`` is carried by the back flank), else ``max(F_j, 0)``
+        while the drive flank is in contact, ``max(-F_j, 0)`` while the back flank is, 0 apart.
+        ``"signed"``: ``N_j,s`` (A) or ``F_j`` (B) at all times.
 
         **Returns:** ``(normal, affine)``, shape ``(PAIR_SLOTS,) + ...``: ``affine`` is the part of
-        the loads that :meth:`generalized_force` puts in the linear part -- ``sigma_j N`` (LTI, A),
-        ``sigma_j F_mesh`` (LTV-B without backlash), 0 otherwise (NLTV; B with backlash) -- so
-        ``normal - affine`` vanishes while the drive flank is in contact with ``F_mesh > 0``.
+        the loads that :meth:`generalized_force` puts in the linear part -- ``N_j,s`` (LTI, A),
+        ``F_j`` (LTV-B with a linear mesh), 0 otherwise (NLTV; B where pairs separate) -- so
+        ``normal - affine`` vanishes while every drive flank is in contact with ``F_j > 0``.
         """
-        quasi_static = sigma * self.normal_load_N
         if self.formulation == "A":
             normal = quasi_static
-            if self.normal_loads == "compressive" and self.contact == "backlash":
-                normal = quasi_static * self.contact_flanks(s, q, omega_pinion, xp)[0][None]
+            if self.normal_loads == "compressive" and not self.mesh_is_linear:
+                normal = quasi_static * self.pair_contact(s, q, qd, omega_pinion, xp).drive
             affine = quasi_static
         else:
-            force = self.mesh_force(s, q, qd, omega_pinion, xp)
-            signed = sigma * force[None]
+            contact = self.pair_contact(s, q, qd, omega_pinion, xp)
+            signed = contact.force
             if self.normal_loads == "signed":
                 normal = signed
-            elif self.contact == "linear":
-                normal = sigma * xp.abs(force)[None]
+            elif self.mesh_is_linear:
+                normal = xp.abs(signed)
             else:
-                drive, back = self.contact_flanks(s, q, omega_pinion, xp)
-                normal = sigma * (drive * xp.maximum(force, 0.0) + back * xp.maximum(-force, 0.0))[None]
+                normal = contact.drive * xp.maximum(signed, 0.0) + contact.back * xp.maximum(-signed, 0.0)
             affine = signed if self.mesh_is_linear else 0.0 * signed
         if self.coupling == "NLTV":
             affine = 0.0 * affine
@@ -451,7 +450,8 @@ class GearPairModel:
 
     def _pair_friction(self, s, q, qd, omega_pinion, xp=np):
         """:meth:`pair_friction` and the affine part of the loads (:meth:`friction_loads`)."""
-        xi_p, xi_g, _, sigma = self.pair_positions(s, xp)
+        xi_p, xi_g, in_path, _ = self.pair_positions(s, xp)
+        sigma, quasi_static = self.mesh.static_loads(self, s, xp)
         nonlinear = self.coupling == "NLTV"
         wp_tot, wg_tot = self.angular_velocities(qd, omega_pinion, nominal=not nonlinear)
         vs = xi_p * wp_tot[None] - xi_g * wg_tot[None]
@@ -459,12 +459,13 @@ class GearPairModel:
         if centres is not None:
             vs = vs + centres[None]
         vr = xi_p * wp_tot[None] + xi_g * wg_tot[None]
-        normal, affine = self.friction_loads(s, q, qd, omega_pinion, sigma, xp)
-        law_load = normal if nonlinear else sigma * self.normal_load_N
+        normal, affine = self.friction_loads(s, q, qd, omega_pinion, quasi_static, xp)
+        law_load = normal if nonlinear else quasi_static
         mu = self.friction.mu(vs, vr, law_load / self.face_width_m, xp)
         pairs = {
             "xi_p": xi_p,
             "xi_g": xi_g,
+            "in_path": in_path,
             "sigma": sigma,
             "vs": vs,
             "vr": vr,
@@ -478,7 +479,9 @@ class GearPairModel:
         """Per-pair sliding velocity, friction coefficient and normal load.
 
         Returns a dict of arrays of shape ``(PAIR_SLOTS,) + s.shape``: ``xi_p``, ``xi_g`` [m],
-        ``sigma``, ``vs``, ``vr`` [m/s], ``mu`` [-], ``normal`` [N] and ``friction`` =
+        ``in_path`` (1.0 on the path of contact), ``sigma`` (the quasi-static load shares: equal for
+        the rectangular mesh, ``N_j,s / N`` emerging from the per-pair static contact), ``vs``,
+        ``vr`` [m/s], ``mu`` [-], ``normal`` [N] and ``friction`` =
         ``mu N_j`` [N]. ``mu`` uses the nominal kinematics and the quasi-static load for LTI and
         LTV, the instantaneous kinematics and the load ``N_j`` for NLTV; the normal loads
         ``N_j >= 0`` are those of :meth:`friction_loads` (MODEL.md section 11). Back-flank contact
@@ -542,7 +545,9 @@ class GearPairModel:
     # -- the split into linear-periodic and nonlinear parts -------------------------------------
     @property
     def mesh_is_linear(self) -> bool:
-        return self.contact == "linear"
+        """The mesh force is affine in the state: LTI (``k_mean``), or a mesh whose pairs cannot
+        separate (no backlash; per pair also no relief, :meth:`~hbgear.gear.mesh.PairContactMesh.is_linear`)."""
+        return self.coupling == "LTI" or self.mesh.is_linear(self)
 
     @property
     def friction_has_linear_part(self) -> bool:
@@ -649,17 +654,16 @@ class GearPairModel:
         return out
 
     def lti_step_forcing(self, s, xp=np):
-        """``G(s) = c N (1/k(s) - <1/k>)`` on the DTE row [N s] for LTI, else ``None``.
+        """``G(s) = c (D(s) - <D>)`` on the DTE row [N s] for LTI, else ``None`` (``D = N/k(s)``
+        rectangular, the static contact's deflection per pair).
 
-        The piecewise-constant part of ``c d_st`` (``d_st = eps + N/k(s) - <N/k>``): ``-F_mesh``
-        holds ``+c d_st'``, whose pointwise part ``c eps'`` is in :meth:`mesh_force` and whose
-        rest is ``dG/dt`` -- impulses ``c N [1/k]`` where ``k`` jumps. Shape ``(ndof,) + s.shape``.
+        ``-F_mesh`` holds ``+c d_st'`` (``d_st = eps + D(s) - <D>``), whose part ``c eps'`` is in
+        :meth:`mesh_force` and whose rest is ``dG/dt`` -- with its impulses ``c [D]`` where ``D``
+        jumps (the rectangular ``D`` is piecewise constant: impulses only). Shape ``(ndof,) + s.shape``.
         """
         if self.coupling != "LTI":
             return None
-        g = self.contact_ratio
-        mean_compliance = (g - 1.0) / self.k_max_N_per_m + (2.0 - g) / self.k_min_N_per_m
-        step = self.mesh_damping_Ns_per_m * self.normal_load_N * (1.0 / self.mesh_stiffness(s, xp) - mean_compliance)
+        step = self.mesh_damping_Ns_per_m * self.normal_load_N * self.mesh.compliance_fluctuation(self, s, xp)
         return xp.stack([step] + [0.0 * step] * (self.ndof - 1))
 
     def lti_damping_impulse(self, s_jump, omega_pinion):
@@ -671,14 +675,9 @@ class GearPairModel:
         return np.asarray(sides[:, 1] - sides[:, 0], dtype=float)
 
     def phase_breakpoints(self) -> np.ndarray:
-        """Mesh phases in [0, 1) where the equations switch (numpy; for time integration)."""
-        g = float(self.contact_ratio)
-        tb = (self.pitch_point_m - float(self.contact_start_m)) / float(self.base_pitch_m)
-        points = {0.0, g - 1.0}
-        for slot in range(PAIR_SLOTS):
-            if 0.0 <= tb - slot < 1.0 and tb < g:
-                points.add(tb - slot)
-        return np.array(sorted(points))
+        """Mesh phases in [0, 1) where the equations switch (numpy; for time integration): pair
+        entry and exit, pitch crossings and, per pair, relief starts and table nodes."""
+        return self.mesh.phase_breakpoints(self)
 
     @property
     def pitch_point_m(self):
@@ -687,13 +686,12 @@ class GearPairModel:
 
     def breakpoint_candidates(self, xp=np):
         """Phases where the equations may switch, traced-friendly (duplicates harmless)."""
-        tb = (self.pitch_point_m - self.contact_start_m) / self.base_pitch_m
-        return xp.stack([xp.asarray(self.contact_ratio - 1.0), tb, tb - 1.0])
+        return self.mesh.breakpoints(self, xp)
 
     def static_state(self, omega_pinion, xp=np):
         """Quasi-static state ``(delta_s(s), u_s)`` about which the vibration is computed.
 
-        ``delta_s = eps + N/k(s)`` (+ half the backlash) carries the static load;
+        ``delta_s`` of :meth:`static_dte` (``eps + N/k(s)``, + half the backlash) carries the static load;
         ``u_s`` [m] is the soft spring's wind-up that balances the mean output torque
         including the mean friction torques of the quasi-static state (MODEL.md section 4):
         ``k_u u_s = < T_p/R_bp + T_fp/R_bp + T_fg/R_bg - T_g/R_bg >``. Zero unless "spring".
@@ -701,11 +699,7 @@ class GearPairModel:
         from ..engine.quadrature import mesh_period_rule
 
         s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
-        _, _, wm = self.speeds(omega_pinion)
-        eps, _ = self.static_transmission_error(s, wm, xp)
-        delta = eps + self.normal_load_N / self.mesh_stiffness(s, xp)
-        if self.contact == "backlash":
-            delta = delta + 0.5 * self.backlash_m
+        delta = self.static_dte(s, omega_pinion, xp)
         if self.boundary != "spring":
             return delta, 0.0 * omega_pinion
         closed = self._closed_form_windup(omega_pinion, xp)
@@ -752,7 +746,7 @@ class GearPairModel:
         for ``sgn``, the integral of the arm changes sign where ``V_s`` does.
         """
         name = self.friction.name
-        if name not in ("arctan", "coulomb", "none"):
+        if name not in ("arctan", "coulomb", "none") or not self.mesh.equal_shares:
             return None
         if name == "none" or (self.coupling == "LTI" and self.lti_friction == "damping"):
             return 0.0 * omega_pinion

@@ -35,11 +35,12 @@ def _mean_stiffness_model(model):
     from dataclasses import replace
 
     from .friction import NoFriction
+    from .mesh import RectangularMesh
 
-    k = model.k_mean_N_per_m
+    k = model.k_mean_N_per_m  # of any mesh (per pair: its own); the constant k_mean is the rectangular one
     changes = dict(k_max_N_per_m=k, k_min_N_per_m=k, damping_ratio=0.0 * model.damping_ratio, friction=NoFriction(),
                    ste_amplitude_m=np.zeros(0), ste_phase_rad=np.zeros(0), spring_damping_ratio=0.0, coupling="LTV",
-                   formulation="A", contact="linear", damping_model="constant")
+                   formulation="A", contact="linear", damping_model="constant", mesh=RectangularMesh())
     if model.bearings is not None:
         changes["bearings"] = replace(model.bearings, damping_ratio=0.0)
     if model.shafts is not None:

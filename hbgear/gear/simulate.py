@@ -203,10 +203,7 @@ def _initial_state(model, omega, u_static, s0):
     if model.coupling == "LTI":
         delta = model.normal_load_N / model.k_mean_N_per_m + model.loaded_static_transmission_error(s, wm)[0]
     else:
-        eps, _ = model.static_transmission_error(s, wm)
-        delta = eps[0] + model.normal_load_N / model.mesh_stiffness(s)[0]
-        if model.contact == "backlash":
-            delta = delta + 0.5 * model.backlash_m
+        delta = model.static_dte(s, omega)[0]
     y0 = np.zeros(2 * model.ndof)
     y0[0] = float(delta)
     return y0
@@ -383,6 +380,9 @@ class _Integrator:
             samples_per_cycle = int(max(256, 2 ** math.ceil(math.log2(24.0 * ratio))))
         self.grid_s = np.arange(samples_per_cycle) / samples_per_cycle
         self.plan = _segment_plan(breakpoints, node_s, self.grid_s)
+        if model.coupling == "LTI" and not model.mesh.equal_shares:
+            raise ValueError("time integration of LTI applies c dD/dt of the loaded static TE as kicks at its jumps "
+                             "only: a per-pair mesh whose static deflection D(s) varies between them needs LTV or NLTV")
         self.kicks = [model.lti_damping_impulse(a, omega) for a, _, _, _ in self.plan]
         self.kick_dv = [minv @ k if np.any(k) else None for k in self.kicks]
 

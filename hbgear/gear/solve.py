@@ -276,11 +276,11 @@ _STATIC_START_ITERATIONS = 10
 
 
 def _quasi_static_start(model: GearPairModel, hb: HarmonicBalance, system: GearSystem) -> np.ndarray:
-    """Scaled unknowns of the quasi-static state: DTE mean ``N <1/k>`` plus the STE mean (zero),
-    harmonics zero; for the reaction boundary the output force unknown ``T_p / R_bp``."""
+    """Scaled unknowns of the quasi-static state: DTE mean ``N <1/k>`` (the mesh's mean static
+    deflection) plus the STE mean (zero), harmonics zero; for the reaction boundary the output
+    force unknown ``T_p / R_bp``."""
     z = np.zeros(hb.size)
-    g = float(model.contact_ratio)
-    mean_compliance = (g - 1.0) / float(model.k_max_N_per_m) + (2.0 - g) / float(model.k_min_N_per_m)
+    mean_compliance = float(model.mesh.mean_compliance(model))
     z[0] = float(model.normal_load_N) * mean_compliance / float(system.displacement_scale)
     if system.free_mean_dof is not None:
         z[system.free_mean_dof * hb.block] = 1.0  # T_g / R_bg ~ N, in units of force_scale = N
@@ -344,8 +344,8 @@ def solve_periodic(
         if result is None or not result.converged:
             start_name = "given"
             if z0 is None:
-                linear = (model.replace(coupling="LTV", contact="linear", normal_loads="signed")
-                          if model.coupling != "LTI" else model)
+                linear = (model.replace(coupling="LTV", contact="linear", normal_loads="signed",
+                                        mesh=model.mesh.closed()) if model.coupling != "LTI" else model)
                 start = solve_periodic(linear, omega, harmonics=harmonics, nu=nu, samples=samples, tolerance=tolerance)
                 z0 = np.array(start.z)
                 if model.contact == "backlash":  # the loaded teeth sit half the backlash further on

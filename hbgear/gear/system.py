@@ -91,10 +91,12 @@ class GearSystem(PeriodicSystem):
 
     @property
     def piecewise_constant_coefficients(self) -> bool:
-        """LTI, or LTV formulation A, without backlash: the homogeneous coefficients are constant
-        between the breakpoints (``k(t)`` a rectangular pulse, friction an excitation)."""
+        """LTI, or LTV formulation A with a linear mesh of piecewise-constant ``k(t)`` (rectangular,
+        or per pair a constant pair stiffness): the homogeneous coefficients are constant between
+        the breakpoints (friction an excitation)."""
         m = self.model
-        return m.is_linear and (m.coupling == "LTI" or (m.coupling == "LTV" and m.formulation == "A"))
+        return m.is_linear and (m.coupling == "LTI" or (m.coupling == "LTV" and m.formulation == "A"
+                                                         and m.mesh.piecewise_constant))
 
     def frequency_scale(self, p):
         """``w_n = sqrt(k_mean / m_e)`` [rad/s] of the model at `p`."""
@@ -188,11 +190,13 @@ def linear_equivalent(model: GearPairModel, solution=None) -> GearPairModel | No
     """The linear model whose variational equations are `model`'s along `solution`, or ``None``.
 
     A linear `model` is its own equivalent; NLTV has none (``mu`` follows the state). Otherwise the
-    candidate is `model` with ``contact = "linear"`` and ``normal_loads = "signed"``: along a
-    solution on which the teeth stay in contact (with backlash ``2b``: ``|x| > b``, ``x = delta -
-    eps``; formulation B: the drive flank, ``x > b``, with a compressive ``F_mesh > 0``) the dead
-    zone ``g(x)`` has slope 1 and the loads of MODEL.md section 11 are the affine ``sigma_j N``
-    (A; a constant excitation also on the back flank) or ``sigma_j F_mesh`` (B), so the
+    candidate is `model` with ``contact = "linear"``, ``normal_loads = "signed"`` and its mesh held
+    closed (:meth:`~hbgear.gear.mesh.PairContactMesh.closed`): along a solution on which the teeth
+    stay in contact (with backlash ``2b``: ``|x| > b``, ``x = delta - eps``; formulation B: the
+    drive flank, ``x > b``, with a compressive ``F_mesh > 0``; per-pair contact: every pair of the
+    path on its drive flank, ``x > b + e_j``, or for A all on the back flank, and for B every
+    ``F_j > 0``) the contact has slope 1 and the loads of MODEL.md section 11 are the affine
+    ``N_j,s`` (A; a constant excitation also on the back flank) or ``F_j`` (B), so the
     linearisations coincide and the candidate's exact monodromy applies.
 
     **Arguments:** `solution`: a :class:`~hbgear.gear.solve.PeriodicSolution` of `model` (anything
@@ -205,21 +209,22 @@ def linear_equivalent(model: GearPairModel, solution=None) -> GearPairModel | No
         return model
     if model.coupling == "NLTV":
         return None
-    linear = model.replace(contact="linear", normal_loads="signed")
+    linear = model.replace(contact="linear", normal_loads="signed", mesh=model.mesh.closed())
     if solution is None:
         return linear
     f = np.linspace(0.0, 1.0, max(1024, 8 * solution.harmonics * solution.nu), endpoint=False)
     q, qd = (np.asarray(a) for a in solution.state_at(f))
     s = (f * solution.nu) % 1.0
     omega = float(solution.omega_pinion)
-    if model.contact == "backlash":
-        eps, _ = model.static_transmission_error(s, model.speeds(omega)[2], np)
-        x = q[0] - np.asarray(eps)
-        gap = x if model.formulation == "B" else np.abs(x)
-        if not np.min(gap) - 0.5 * float(model.backlash_m) > 1e-3 * float(np.ptp(x)) + 1e-15:
+    wm = model.speeds(omega)[2]
+    eps, deps = (np.asarray(a) for a in model.static_transmission_error(s, wm, np))
+    x = q[0] - eps
+    if not model.mesh_is_linear:
+        gap = model.mesh.contact_gap(model, s, x, model.formulation)
+        if not np.min(gap) > 1e-3 * float(np.ptp(x)) + 1e-15:
             return None
     if model.formulation == "B":
-        force = np.asarray(model.mesh_force(s, q, qd, omega, np))
+        force = model.mesh.compressive_force(model, s, x, qd[0] - deps, wm)
         if not np.min(force) > 1e-3 * float(np.ptp(force)) + 1e-12 * float(model.normal_load_N):
             return None
     return linear

@@ -53,12 +53,27 @@ class FlankRelief:
         u = xp.maximum(depth / length, 0.0)
         return u if shape == "linear" else u * u
 
+    @staticmethod
+    def _ramp_slope(depth, length, shape, xp):
+        """``d f(depth/L) / d depth``: ``1/L`` (linear) or ``2 u / L`` (parabolic) for ``depth > 0``, else 0."""
+        if length == 0.0:
+            return 0.0 * depth
+        inside = xp.where(depth > 0.0, 1.0, 0.0)
+        return inside / length if shape == "linear" else 2.0 * xp.maximum(depth / length, 0.0) / length
+
     def deviation(self, xi, xi_root: float, xi_tip: float, xp=np):
         """``e(xi)`` [m] of this flank, `xi` its roll distance from its base tangency [m]."""
         xi = xp.asarray(xi)
         tip = self._ramp(xi - (xi_tip - self.tip_length_m), self.tip_length_m, self.shape, xp)
         root = self._ramp((xi_root + self.root_length_m) - xi, self.root_length_m, self.shape, xp)
         return self.tip_relief_m * tip + self.root_relief_m * root
+
+    def slope(self, xi, xi_root: float, xi_tip: float, xp=np):
+        """``de/dxi`` [-] of this flank (:meth:`deviation`'s derivative; one-sided: 0 at a relief start)."""
+        xi = xp.asarray(xi)
+        tip = self._ramp_slope(xi - (xi_tip - self.tip_length_m), self.tip_length_m, self.shape, xp)
+        root = self._ramp_slope((xi_root + self.root_length_m) - xi, self.root_length_m, self.shape, xp)
+        return self.tip_relief_m * tip - self.root_relief_m * root
 
 
 @dataclass(frozen=True)
@@ -78,6 +93,32 @@ class ProfileModification:
         e_p = self.pinion.deviation(xi_p, pair.contact_start_m, pair.contact_end_m, xp)
         e_g = self.gear.deviation(length - xi_p, length - pair.contact_end_m, length - pair.contact_start_m, xp)
         return e_p + e_g
+
+    def slope(self, pair: GearPair, xi_p, xp=np):
+        """``de_j/dxi_p = e_p'(xi_p) - e_g'(L - xi_p)`` [-]: the composite deviation's rate along the
+        line of action (a pair's ``de_j/dt`` is this times ``R_bp Omega_p``)."""
+        xi_p = xp.asarray(xi_p)
+        length = pair.line_of_action_m
+        s_p = self.pinion.slope(xi_p, pair.contact_start_m, pair.contact_end_m, xp)
+        s_g = self.gear.slope(length - xi_p, length - pair.contact_end_m, length - pair.contact_start_m, xp)
+        return s_p - s_g
+
+    def starts(self, pair: GearPair) -> tuple[float, ...]:
+        """Positions [m] from ``T_1`` where a relief of non-zero amount begins (where ``e`` has a
+        kink and ``de/dt`` jumps): pinion tip ``x_E - L``, pinion root ``x_A + L``, gear tip
+        ``x_A + L``, gear root ``x_E - L`` (arithmetic on `pair`'s numbers: they may be traced)."""
+        xa, xe = pair.contact_start_m, pair.contact_end_m
+        ends = ((self.pinion.tip_relief_m, xe - self.pinion.tip_length_m),
+                (self.pinion.root_relief_m, xa + self.pinion.root_length_m),
+                (self.gear.tip_relief_m, xa + self.gear.tip_length_m),
+                (self.gear.root_relief_m, xe - self.gear.root_length_m))
+        return tuple(x for amount, x in ends if amount > 0.0)
+
+    @property
+    def is_zero(self) -> bool:
+        """No relief on either flank (every amount zero)."""
+        return all(getattr(flank, name) == 0.0 for flank in (self.pinion, self.gear)
+                   for name in ("tip_relief_m", "root_relief_m"))
 
 
 def _amount(key: str, value) -> float:
