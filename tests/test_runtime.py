@@ -13,7 +13,10 @@ MULTI_CPU = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sc
 
 
 def _run(code: str, **env) -> str:
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(os.environ, **env),
+    """`code` in a fresh interpreter with `env` over this one's, less the suite's cache settings
+    (tests/conftest.py): the default cache is part of what is tested here."""
+    base = {k: v for k, v in os.environ.items() if k not in ("HBGEAR_CACHE_DIR", "HBGEAR_NO_CACHE")}
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(base, **env),
                          capture_output=True, text=True, check=True)
     return out.stdout + out.stderr
 
