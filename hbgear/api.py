@@ -63,13 +63,14 @@ class FrequencyResponse(_gear.GearFrequencyResponse):
         orders = self.mesh_orders() if orders is None else orders
         return orders_figure(self, orders, self.order_amplitudes_um(orders), self.resonance, title)
 
-    def plot_bearing_orders(self, name: str, orders=None, title: str | None = None):
+    def plot_bearing_orders(self, name: str, orders=None, title: str | None = None, amplitudes_N=None):
         """Order tracking of one bearing force (`name`: ``pinion_loa``, ``pinion_oloa``, ``gear_loa``,
-        ``gear_oloa``; on bearings only), as :meth:`plot_orders` in N (``bearing_orders_<name>.png``)."""
+        ``gear_oloa``; on bearings only), as :meth:`plot_orders` in N (``bearing_orders_<name>.png``).
+        `amplitudes_N`: :meth:`bearing_order_amplitudes_N` at `orders`, when already computed."""
         from .outputs.plots import orders_figure
 
         orders = self.mesh_orders() if orders is None else orders
-        amplitudes = self.bearing_order_amplitudes_N(orders)
+        amplitudes = self.bearing_order_amplitudes_N(orders) if amplitudes_N is None else amplitudes_N
         if name not in amplitudes:
             raise ValueError(f"no bearing force {name!r} on this model; it has {sorted(amplitudes) or 'none'}")
         gear, direction = name.split("_")

@@ -198,8 +198,10 @@ def run(config, args, out_dir) -> int:
         from ..outputs.plots import bearing_forces_figure
 
         save_figure_atomic(bearing_forces_figure(curve, modes=modes), out_dir / "bearing_forces.png", dpi=120)
+        amplitudes = curve.bearing_order_amplitudes_N(orders)  # once for the four figures
         for name in BEARING_FORCES:
-            save_figure_atomic(curve.plot_bearing_orders(name, orders), out_dir / f"bearing_orders_{name}.png", dpi=120)
+            save_figure_atomic(curve.plot_bearing_orders(name, orders, amplitudes_N=amplitudes),
+                               out_dir / f"bearing_orders_{name}.png", dpi=120)
     if curve.response.stability is not None:
         save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
     if not curve.success:
