@@ -47,7 +47,7 @@ def _unit_layout(sub_intervals: int, grade_levels: int) -> np.ndarray:
     return edges
 
 
-def mesh_period_rule(breakpoints, max_order: int, xp=np):
+def mesh_period_rule(breakpoints, max_order: int, xp=np, same_nodes: bool = False):
     """Nodes ``s_i`` in [0, 1) and weights ``w_i`` (summing to 1) for one mesh period.
 
     **Arguments:**
@@ -55,12 +55,16 @@ def mesh_period_rule(breakpoints, max_order: int, xp=np):
     - `breakpoints`: 1-D array of phases in [0, 1] where the integrand may jump (may be
       traced; duplicates and out-of-range values are harmless: they are clipped).
     - `max_order`: highest harmonic ``r`` to be integrated accurately (sets the density).
+    - `same_nodes`: with numpy too, the layout of the traced rule (every interval the same number
+      of sub-intervals), so that a quantity computed once in numpy and once in a compiled
+      function is the same number to rounding even where its integrand is not smooth between
+      the breakpoints (the two layouts then differ beyond rounding).
 
     **Returns:** ``(s, w)``, shapes ``(n,)``; ``n`` depends only on the number of breakpoints
     and `max_order`, so the rule is jit-friendly.
     """
     a, b, sub = _intervals(breakpoints, max_order, xp)
-    if xp is np:  # concrete breakpoints: sub-intervals in proportion to each interval's width
+    if xp is np and not same_nodes:  # concrete breakpoints: sub-intervals in proportion to each interval's width
         return _proportional_rule(np.asarray(a), np.asarray(b), sub)
     unit = _unit_layout(sub, _GRADE_LEVELS)
     x, wx = _gauss_legendre()

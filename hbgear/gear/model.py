@@ -698,7 +698,11 @@ class GearPairModel:
         """
         from ..engine.quadrature import mesh_period_rule
 
-        s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp)
+        # the same nodes in numpy (read-outs, time integration) as in the compiled HB residual: with
+        # relief the quasi-static pair loads have a kink between the breakpoints (a relieved pair
+        # taking up load), where two layouts differ beyond rounding (~2e-7 of u_s), and the summary's
+        # output power k_b (u + u_s) Omega_g R_bg would not balance the residual's
+        s, w = mesh_period_rule(self.breakpoint_candidates(xp), 4, xp, same_nodes=True)
         delta = self.static_dte(s, omega_pinion, xp)
         if self.boundary != "spring":
             return delta, 0.0 * omega_pinion

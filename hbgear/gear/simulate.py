@@ -310,7 +310,7 @@ def _initial_reaction(model, omega):
         return 0.0
     from ..engine.quadrature import mesh_period_rule
 
-    s, w = mesh_period_rule(model.breakpoint_candidates(), 4)
+    s, w = mesh_period_rule(model.breakpoint_candidates(), 4, same_nodes=True)  # static_state's nodes
     delta, _ = model.static_state(omega)
     q = np.stack([np.asarray(delta)] + [0.0 * np.asarray(s)] * (model.ndof - 1))
     return _output_force_mean(model, omega, np.asarray(s), np.asarray(w), np.concatenate([q, 0.0 * q]))
