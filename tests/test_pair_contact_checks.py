@@ -159,8 +159,8 @@ def test_hand_written_mesh_is_the_model_mesh(relieved_run):
 def test_energy_identity_from_time_integration(relieved_run):
     """Net input power = friction loss + <F_mesh delta'> along the time integration, with the
     hand-written forces and friction at the integrator's quadrature nodes: measured 2.7e-7 of the
-    dissipation (rtol 1e-9; the nodes do not split at the contact events, which the integrator's
-    own steps do)."""
+    dissipation (rtol 1e-9; the integrator's nodes are a fixed rule between the breakpoints, not
+    split at the contact events)."""
     model, hand, omega, _, ti = relieved_run
     s, q, qd, w = ti.nodes
     imbalance, friction = _balance(hand, model, omega, s, q, qd, w, ti.u_static)
