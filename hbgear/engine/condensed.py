@@ -15,11 +15,12 @@ Then the harmonic-balance Jacobian is, with ``B = 2H+1`` and ``x`` coordinate-ma
 
 .. math::  J = A + U (C \otimes I_B),
 
-where ``A`` is the mean linear operator, block-diagonal per harmonic (``Kb - (k w)^2 M`` on the
+where ``A`` is the mean Jacobian, block-diagonal per harmonic (``Kb - (k w)^2 M`` on the
 diagonal, ``+-k w Cb`` off it, bars the time averages of the periodic stiffness and damping of
-``Q_lin``), and ``U = (J - A)(C^+ \otimes I_B)`` (``n B x m B``, ``C^+`` a right inverse): the
-difference ``J - A`` vanishes on the directions ``C q = 0`` because the time-varying and nonlinear
-terms do not see them and ``A`` holds exactly the mean of the linear ones. ``U`` costs ``m``
+``Q_lin`` minus those of the sampled derivatives of ``Q_nl``), and ``U = (J - A)(C^+ \otimes I_B)``
+(``n B x m B``, ``C^+`` a right inverse): the difference ``J - A`` vanishes on the directions
+``C q = 0`` because the time-varying and nonlinear terms do not see them and the means in ``A``
+see them no more. ``U`` costs ``m``
 pointwise directional derivatives of ``Q_nl`` and the convolution matrices of ``K(s) C^+``,
 ``C(s) C^+`` -- no ``n B`` tangents and no ``(n B)^2`` product.
 

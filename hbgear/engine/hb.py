@@ -772,7 +772,11 @@ class HarmonicBalance:
         u = k_ports + w * c_ports
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, right)
+            t_q, t_v, g_q, g_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, right)
+            # A holds the mean derivatives of Q_nl too (a mesh that is all nonlinear, backlash,
+            # leaves Kb no stiffness on its coordinate): the mean Jacobian, as the structured
+            # path's preconditioner
+            k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
 
             def flat(b):
                 return jnp.transpose(b, (0, 2, 1, 3)).reshape(n * B, m * B)
@@ -795,22 +799,28 @@ class HarmonicBalance:
                                       keep)
 
     def _nonlinear_port_blocks(self, x, extra, p, system, layout, right):
-        """``(T_q, T_v)`` of :meth:`_nonlinear_jacobian` times ``C^T (x) I``, blocks ``(n, m, B, B)``,
-        from ``m`` directional derivatives (the columns of `right` ``(n, m)``)."""
+        """``(T_q, T_v, Gb_q, Gb_v)``: :meth:`_nonlinear_jacobian`'s blocks times ``C^T (x) I``
+        ``(n, m, B, B)``, without the means ``Gb`` ``(n, m)`` of the sampled derivatives (returned
+        apart), from ``m`` directional derivatives (the columns of `right` ``(n, m)``)."""
         n, H, N = self.ndof, self.harmonics, self.samples
         derivatives, (_, at_c, weight, delta) = self._nonlinear_derivatives(x, extra, p, system, layout, right)
         coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N
+        means = jnp.real(coeff[..., 0])  # (1|2, n, m)
+        coeff = jnp.concatenate([0.0 * coeff[..., :1], coeff[..., 1:]], axis=-1)
         blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, m, B, B)
         blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, _jumps(derivatives[..., N:], weight), at_c)
-        t_q = blocks[0] if system.nonlinear_force_uses_displacement else jnp.zeros_like(blocks[0])
+        uses_q = system.nonlinear_force_uses_displacement
+        t_q = blocks[0] if uses_q else jnp.zeros_like(blocks[0])
         t_v = blocks[-1]
+        g_q = means[0] if uses_q else jnp.zeros_like(means[0])
+        g_v = means[-1]
         if events.declared(system, p):
             velocity = self._velocity(x, system, p)
             e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
                                             self.harmonics, self.nu, self.samples)
             t_q = t_q + jnp.einsum("ijbd,jl->ilbd", e_q, right)
             t_v = t_v + jnp.einsum("ijbd,jl->ilbd", e_v, right)
-        return t_q, t_v
+        return t_q, t_v, g_q, g_v
 
     @partial(jax.jit, static_argnums=0)
     def _hill_matrices_jit(self, z, p, system, prepared):
