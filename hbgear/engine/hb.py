@@ -29,6 +29,13 @@ Many harmonics: from :data:`STRUCTURED_MIN_SIZE` unknowns on, :meth:`HarmonicBal
 builds the structured path instead (:mod:`hbgear.engine.structured`: the same residual by FFT
 products, Newton steps by preconditioned GMRES, no ``(size x size)`` array);
 :meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose.
+
+Many coordinates, few of them nonlinear: for a system that declares an ``input_map`` the
+prepared pieces hold the condensed path (:mod:`hbgear.engine.condensed`, chosen by
+:meth:`HarmonicBalance.prepare`): the residual's linear part as the mean operator plus its port
+part, and for the continuation corrector (:func:`residual_functions`) the Jacobian as a
+:class:`~hbgear.engine.condensed.PortJacobian` whose bordered systems are solved by Woodbury on
+the ports. :meth:`HarmonicBalance.residual_and_jacobians` and the Hill matrices stay dense.
 """
 
 from __future__ import annotations
@@ -873,6 +880,8 @@ def _functions_of(hb: HarmonicBalance):
     def residual(z, p, system, prepared):
         return hb.residual(jnp.asarray(z), p, system, prepared)
 
+    # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled)
+    residual_and_jacobians.jacobian_is_structured = lambda system, prepared: prepared.condensed is not None
     return residual_and_jacobians, residual
 
 

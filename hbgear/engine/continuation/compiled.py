@@ -190,6 +190,15 @@ def _zeros_like_tree(shapes):
     return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
 
 
+def _jacobian_is_structured(residual_and_jacobians, size, args) -> bool:
+    """Whether ``R_z`` of these functions and `args` is structured: the functions' own
+    ``jacobian_is_structured(*args)`` when they have one (no trace), else an abstract evaluation."""
+    said = getattr(residual_and_jacobians, "jacobian_is_structured", None)
+    if said is not None:
+        return bool(said(*args))
+    return _structured(jax.eval_shape(lambda a: residual_and_jacobians(jnp.zeros(size), 1.0, *a)[1], tuple(args)))
+
+
 # ------------------------------------------------------------------------------ evaluations
 def _evaluate(eq: _Equations, y):
     """``(R, [R_z, p_ref R_p])`` at ``y = (z, p / p_ref)`` (a structured ``R_z``: the pair
@@ -327,7 +336,10 @@ def _correct(eq: _Equations, previous, factor: _Factor):
     start_chord = factor.usable & (eq.max_iter > 0)
     r0 = jax.lax.cond(start_chord, lambda: _residual_of(eq, eq.y_pred), lambda: jnp.zeros(size))
     norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
-    jac0 = _zeros_like_tree(jax.eval_shape(lambda y: _evaluate(eq, y)[1], eq.y_pred))
+    if _jacobian_is_structured(eq.residual_and_jacobians, size, eq.args):
+        jac0 = _zeros_like_tree(jax.eval_shape(lambda y: _evaluate(eq, y)[1], eq.y_pred))
+    else:
+        jac0 = jnp.zeros((size, size + 1))
     init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=jac0, norm=norm0,
                     cand=eq.y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, CHORD, PREDICTOR).astype(i32),
                     status=jnp.asarray(RUNNING, i32), chord_it=jnp.asarray(0, i32))
@@ -398,8 +410,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
     def no_factor(previous, xp=jnp, args=()):
         """An unusable factorisation: zeros of the dense LU's shape or, when the Jacobian of these
         `args` is structured, of its factorisation's (found by an abstract evaluation)."""
-        shapes = jax.eval_shape(lambda a: residual_and_jacobians(jnp.zeros(size), 1.0, *a)[1], tuple(args))
-        if not _structured(shapes):
+        if not _jacobian_is_structured(residual_and_jacobians, size, args):
             return _no_factor(size, previous, xp)
 
         def factor(a, prev):
