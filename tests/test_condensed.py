@@ -124,6 +124,7 @@ def test_auto_takes_the_condensed_path_only_where_it_pays():
     condense at 130 unknowns) and any system without an input map stay dense."""
     system = gear(8, "LTV")
     assert HarmonicBalance(8, 32, 1, 256).prepare(system).condensed is not None
+    assert HarmonicBalance(8, 32, 1, 256).prepare(gear(8, "NLTV")).condensed is not None  # 4 ports: 262 of 520
     assert HarmonicBalance(8, 32, 1, 256, operator="dense").prepare(system).condensed is None
     data = read_toml(EXAMPLE)
     del data["bearings"]

@@ -70,9 +70,11 @@ STRUCTURED_MIN_SIZE = 1000
 
 #: From this many unknowns on (and below :data:`STRUCTURED_MIN_SIZE`), ``operator="auto"`` takes
 #: the condensed path (:mod:`hbgear.engine.condensed`) for a system that declares an
-#: ``input_map`` whose ports ``m (2H+1) + 2`` are at most half the unknowns. Measured in
+#: ``input_map`` whose ports ``m (2H+1) + 2`` are at most :data:`CONDENSED_MAX_PORTS` of the
+#: unknowns (its LU then costs at most ~40 % of the dense one). Measured in
 #: ``benchmarks/bench_bearings.py``.
 CONDENSED_MIN_SIZE = 200
+CONDENSED_MAX_PORTS = 0.75
 
 
 class ForcingPieces(NamedTuple):
@@ -244,7 +246,8 @@ class HarmonicBalance:
         """The :class:`~hbgear.engine.condensed.CondensedOperator` of a system that declares an
         ``input_map`` (checked at a probe state, :func:`~hbgear.engine.condensed.check_input_map`),
         when :attr:`operator` asks for it or, ``"auto"``, when it pays off: at least
-        :data:`CONDENSED_MIN_SIZE` unknowns and ports ``m (2H+1) + 2`` at most half of them.
+        :data:`CONDENSED_MIN_SIZE` unknowns and ports ``m (2H+1) + 2`` at most
+        :data:`CONDENSED_MAX_PORTS` of them.
         Else ``None`` (the dense path)."""
         if self.operator not in ("auto", "condensed"):
             return None
@@ -260,7 +263,8 @@ class HarmonicBalance:
             if basis is None:
                 return None
             ports = basis[0].shape[0]
-            if not forced and not (self.size >= CONDENSED_MIN_SIZE and ports * self.block + 2 <= self.size // 2):
+            if not forced and not (self.size >= CONDENSED_MIN_SIZE
+                                   and ports * self.block + 2 <= CONDENSED_MAX_PORTS * self.size):
                 return None
             condensed.check_input_map(system, p, basis)
             pieces = ()
