@@ -173,7 +173,8 @@ class Chain(PeriodicSystem):
         k, c = 1.0, 0.03
         spring = [-(k * (q[0] - q[1]) + c * (qd[0] - qd[1]))]
         for i in (1, 2):
-            spring.append(k * (q[i - 1] - q[i]) + c * (qd[i - 1] - qd[i]) - k * (q[i] - q[i + 1]) - c * (qd[i] - qd[i + 1]))
+            spring.append(k * (q[i - 1] - q[i]) + c * (qd[i - 1] - qd[i])
+                          - k * (q[i] - q[i + 1]) - c * (qd[i] - qd[i + 1]))
         spring.append(k * (q[2] - q[3]) + c * (qd[2] - qd[3]) - 0.5 * q[3] - c * qd[3])
         ground = -(1.0 + 0.3 * xp.cos(2 * np.pi * s)) * q[0] + self.forcing * xp.cos(2 * np.pi * s)
         linear = xp.stack([spring[0] + ground] + spring[1:])

@@ -50,7 +50,8 @@ import numpy as np
 
 from . import fourier
 
-__all__ = ["CondensedOperator", "port_operator", "PortJacobian", "PortFactor", "check_input_map", "port_basis", "as_matrix"]
+__all__ = ["CondensedOperator", "port_operator", "PortJacobian", "PortFactor", "check_input_map", "port_basis",
+           "as_matrix"]
 
 
 class CondensedOperator(NamedTuple):

@@ -169,7 +169,8 @@ class _Run:
                 first = self.correct(y_guess, fixed_p, p0 / scale, start_iterations, seed)  # or fall back
             first = first if isinstance(first, _Point) else None
         if first is None:
-            start = newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p0))), lambda z: residual(z, float(p0)), z0,
+            start = newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p0))),
+                           lambda z: residual(z, float(p0)), z0,
                            tolerance=self.tolerance, max_iterations=start_iterations)
             if not start.converged:
                 return _Stop(Status.START_FAILED,
