@@ -29,6 +29,13 @@ Many harmonics: from :data:`STRUCTURED_MIN_SIZE` unknowns on, :meth:`HarmonicBal
 builds the structured path instead (:mod:`hbgear.engine.structured`: the same residual by FFT
 products, Newton steps by preconditioned GMRES, no ``(size x size)`` array);
 :meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose.
+
+Many coordinates, few of them nonlinear: for a system that declares an ``input_map`` the
+prepared pieces hold the condensed path (:mod:`hbgear.engine.condensed`, chosen by
+:meth:`HarmonicBalance.prepare`): the residual's linear part as the mean operator plus its port
+part, and for the continuation corrector (:func:`residual_functions`) the Jacobian as a
+:class:`~hbgear.engine.condensed.PortJacobian` whose bordered systems are solved by Woodbury on
+the ports. :meth:`HarmonicBalance.residual_and_jacobians` and the Hill matrices stay dense.
 """
 
 from __future__ import annotations
@@ -42,12 +49,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import events, fourier, structured
+from . import condensed, events, fourier, structured
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 
 
 __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions",
-           "STRUCTURED_MIN_SIZE"]
+           "STRUCTURED_MIN_SIZE", "CONDENSED_MIN_SIZE"]
 
 #: From this many unknowns ``n (2H+1)`` on, ``operator="auto"`` takes the structured path
 #: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the mean-Jacobian preconditioner,
@@ -60,6 +67,14 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
 #: Jacobian, keep their frozen matrices; above it the dense LU grows like size^3, its matrices
 #: like size^2.
 STRUCTURED_MIN_SIZE = 1000
+
+#: From this many unknowns on (and below :data:`STRUCTURED_MIN_SIZE`), ``operator="auto"`` takes
+#: the condensed path (:mod:`hbgear.engine.condensed`) for a system that declares an
+#: ``input_map`` whose ports ``m (2H+1) + 2`` are at most :data:`CONDENSED_MAX_PORTS` of the
+#: unknowns (its LU then costs at most ~40 % of the dense one). Measured in
+#: ``benchmarks/bench_bearings.py``.
+CONDENSED_MIN_SIZE = 200
+CONDENSED_MAX_PORTS = 0.75
 
 
 class ForcingPieces(NamedTuple):
@@ -106,7 +121,10 @@ class Prepared(NamedTuple):
     ``(R+1, n)`` its Fourier kernel with the weights folded in (``None`` on the structured path);
     `frozen` the parameter-independent dense operator (or ``None``); `jumps` the jump layout (or
     ``None``: built in the trace); `structured` the pieces of the structured path
-    (:class:`~hbgear.engine.structured.StructuredOperator`, or ``None``: the dense path).
+    (:class:`~hbgear.engine.structured.StructuredOperator`, or ``None``: the dense path);
+    `condensed` the pieces of the condensed path (:class:`~hbgear.engine.condensed.CondensedOperator`,
+    or ``None``): the residual is the dense path's, the continuation corrector's Jacobian a
+    :class:`~hbgear.engine.condensed.PortJacobian`.
     """
 
     nodes: Any
@@ -115,6 +133,7 @@ class Prepared(NamedTuple):
     frozen: FrozenOperator | None = None
     jumps: JumpLayout | None = None
     structured: structured.StructuredOperator | None = None
+    condensed: condensed.CondensedOperator | None = None
 
     @property
     def rule(self):
@@ -138,8 +157,10 @@ class HarmonicBalance:
     **Arguments:** `ndof`: coordinates; `harmonics`: ``H``; `nu`: 1 (harmonics of the
     excitation) or 2 (adds half orders); `samples`: AFT samples per base period ``N``;
     `operator`: ``"dense"`` (Jacobian matrices, LU), ``"structured"`` (FFT products and GMRES,
-    :mod:`hbgear.engine.structured`) or ``"auto"`` (structured from :data:`STRUCTURED_MIN_SIZE`
-    unknowns on).
+    :mod:`hbgear.engine.structured`), ``"condensed"`` (the continuation corrector solves on the
+    ports of a system's ``input_map``, :mod:`hbgear.engine.condensed`) or ``"auto"`` (structured
+    from :data:`STRUCTURED_MIN_SIZE` unknowns on; condensed from :data:`CONDENSED_MIN_SIZE` for a
+    system with an input map that pays off).
     """
 
     ndof: int
@@ -149,8 +170,8 @@ class HarmonicBalance:
     operator: str = "auto"
 
     def __post_init__(self):
-        if self.operator not in ("auto", "dense", "structured"):
-            raise ValueError(f"operator must be 'auto', 'dense' or 'structured', got {self.operator!r}")
+        if self.operator not in ("auto", "dense", "structured", "condensed"):
+            raise ValueError(f"operator must be 'auto', 'dense', 'structured' or 'condensed', got {self.operator!r}")
         if self.samples < 2 * self.harmonics + 2:
             raise ValueError(f"samples ({self.samples}) must be >= 2 H + 2 = {2 * self.harmonics + 2}")
         if self.samples % self.nu:
@@ -218,7 +239,42 @@ class HarmonicBalance:
                 return Prepared(pieces.lattice.nodes, None, None, None, self._frozen_jumps(system), pieces)
             rule = _RULES.get_or_make((_breakpoint_key(system, p), self.max_mesh_order),
                                       lambda: self._rule(system, p))
-            return Prepared(*rule, self._frozen_operator(system, p, rule), self._frozen_jumps(system))
+            return Prepared(*rule, self._frozen_operator(system, p, rule), self._frozen_jumps(system), None,
+                            self._condensed(system, p, rule))
+
+    def _condensed(self, system, p, rule) -> condensed.CondensedOperator | None:
+        """The :class:`~hbgear.engine.condensed.CondensedOperator` of a system that declares an
+        ``input_map`` (checked at a probe state, :func:`~hbgear.engine.condensed.check_input_map`),
+        when :attr:`operator` asks for it or, ``"auto"``, when it pays off: at least
+        :data:`CONDENSED_MIN_SIZE` unknowns and ports ``m (2H+1) + 2`` at most
+        :data:`CONDENSED_MAX_PORTS` of them.
+        Else ``None`` (the dense path)."""
+        if self.operator not in ("auto", "condensed"):
+            return None
+        forced = self.operator == "condensed"
+        declared = system.input_map(p)
+        if declared is None or not self._toeplitz_ok(system):
+            if forced:
+                raise ValueError("operator='condensed' needs a system with an input_map and samples > 4 H")
+            return None
+
+        def make():
+            basis = condensed.port_basis(declared, self.ndof)
+            if basis is None:
+                return None
+            ports = basis[0].shape[0]
+            if not forced and not (self.size >= CONDENSED_MIN_SIZE
+                                   and ports * self.block + 2 <= CONDENSED_MAX_PORTS * self.size):
+                return None
+            condensed.check_input_map(system, p, basis)
+            pieces = ()
+            if system.coefficients_independent_of_parameter:
+                rule_np = tuple(np.asarray(a) for a in rule)
+                _, stiffness, damping = self._periodic_coefficients(system, p, rule_np, np)
+                pieces = jax.device_put(condensed.port_operator(stiffness, damping, basis[0], self.harmonics, np))
+            return condensed.CondensedOperator(jax.device_put(basis[0]), *pieces)
+
+        return _FROZEN.get_or_make(self._content_key(system, "condensed", rule[0].shape), make)
 
     def _rule(self, system, p):
         """``(nodes, kernel_cos, kernel_sin)`` of the mesh-period rule, weights folded in (device arrays)."""
@@ -411,6 +467,15 @@ class HarmonicBalance:
         structured path as FFT products (:func:`~hbgear.engine.structured.linear_response`)."""
         if prepared.structured is not None:
             return structured.linear_response(self, x, p, system, prepared)
+        if prepared.condensed is not None:  # A(w) x + (P_K + w P_C)(C x): O(n B (n + m B))
+            k_bar, c_bar, k_ports, c_ports = self._port_operator(system, p, prepared)
+            w = self.base_frequency(system, p)
+            xc = x.reshape(self.ndof, self.block)
+            v1 = fourier.differentiate(xc, self.harmonics, 1.0, jnp)
+            mass = system.mass_matrix(p, jnp)
+            mean = k_bar @ xc + w * (c_bar @ v1) + w**2 * (mass @ fourier.differentiate(v1, self.harmonics, 1.0, jnp))
+            y = (prepared.condensed.ports @ xc).reshape(-1)
+            return mean.reshape(self.size) + k_ports @ y + w * (c_ports @ y) - self._forcing(system, p, prepared)
         frozen = prepared.frozen
         if frozen is None:
             lin, forcing, _ = self.linear_operator(system, p, prepared)
@@ -620,33 +685,37 @@ class HarmonicBalance:
             t_q, t_v = t_q + self._flatten(e_q), t_v + self._flatten(e_v)
         return t_q, t_v, jnp.kron(jnp.eye(n), d)
 
-    def _nonlinear_derivatives(self, x, extra, p, system, layout=None):
+    def _nonlinear_derivatives(self, x, extra, p, system, layout=None, directions=None):
         """``(G, layout)``: the pointwise derivatives of ``Q_nl`` at the sample points of
         :meth:`_sample_points` (``N`` uniform, then the ``2C`` jump sides), shape
         ``(1|2, n_row, n_col, N + 2C)`` (``dQ/dq`` first when the system uses it, then
-        ``dQ/dq'``), from ``n`` directional derivatives each; `layout` the jump layout used."""
+        ``dQ/dq'``), from ``n`` directional derivatives each; `layout` the jump layout used.
+        `directions` ``(n, k)``: derivatives along its columns instead (``n_col = k``)."""
         n = self.ndof
         s, q, qd, layout = self._sample_points(x, self._velocity(x, system, p), system, p, layout)
 
         def f(qq, vv):
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
 
-        eye = jnp.eye(n)
-        dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[j][:, None], qd.shape),))[1] for j in range(n)], axis=1)
+        eye = jnp.eye(n) if directions is None else directions
+        count = eye.shape[1]
+        dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[:, j][:, None], qd.shape),))[1] for j in range(count)], axis=1)
         derivatives = [dv]
         if system.nonlinear_force_uses_displacement:
-            dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[j][:, None], q.shape),))[1] for j in range(n)], axis=1)
+            dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[:, j][:, None], q.shape),))[1] for j in range(count)], axis=1)
             derivatives.insert(0, dq)
         return jnp.stack(derivatives), layout
 
-    def _times_derivative(self, a, system, p):
+    def _times_derivative(self, a, system, p, blocks=None):
         """``a @ (I (x) D)`` without the product: column ``a_k`` of each block becomes ``-k w`` times
-        column ``b_k``, column ``b_k`` becomes ``k w`` times column ``a_k``, column ``a_0`` zero."""
+        column ``b_k``, column ``b_k`` becomes ``k w`` times column ``a_k``, column ``a_0`` zero
+        (`blocks`: the column blocks of `a`, default ``ndof``)."""
+        blocks = self.ndof if blocks is None else blocks
         d = fourier.derivative_matrix(self.harmonics, 1.0)  # numpy: static structure
         source = np.argmax(np.abs(d), axis=0)  # the one nonzero row of each column of D
         factor = d[source, np.arange(self.block)]
-        source = (np.arange(self.ndof)[:, None] * self.block + source[None]).ravel()
-        factor = np.tile(factor, self.ndof) * self.base_frequency(system, p)
+        source = (np.arange(blocks)[:, None] * self.block + source[None]).ravel()
+        factor = np.tile(factor, blocks) * self.base_frequency(system, p)
         return a[:, source] * factor
 
     def _toeplitz_ok(self, system) -> bool:
@@ -680,6 +749,89 @@ class HarmonicBalance:
         # push all size+1 tangents through the operator's construction), dR/dz at a fixed operator
         r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
         return r, self._jacobian(z, p, system, prepared, self.linear_operator(system, p, prepared)), jp
+
+    def residual_and_port_jacobians(self, z, p, system, prepared):
+        """``(R, dR/dz, dR/dp)`` on the condensed path: ``dR/dz`` as a
+        :class:`~hbgear.engine.condensed.PortJacobian` (`prepared` must hold the condensed pieces)."""
+        return self._residual_and_port_jacobians_jit(z, p, system, prepared)
+
+    @partial(jax.jit, static_argnums=0)
+    def _residual_and_port_jacobians_jit(self, z, p, system, prepared):
+        r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
+        return r, self._port_jacobian(z, p, system, prepared), jp
+
+    def _port_operator(self, system, p, prepared):
+        """``(Kb, Cb, P_K, P_C)`` of :class:`~hbgear.engine.condensed.CondensedOperator`: kept, or
+        from the coefficients by quadrature (a parameter-dependent system)."""
+        pieces = prepared.condensed
+        if pieces.mean_stiffness is not None:
+            return pieces.mean_stiffness, pieces.mean_damping, pieces.stiffness_ports, pieces.damping_ports
+        _, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
+        return condensed.port_operator(stiffness, damping, pieces.ports, self.harmonics, jnp)
+
+    def _port_jacobian(self, z, p, system, prepared) -> condensed.PortJacobian:
+        """``dR/dz = A + U (C (x) I)`` (scaled) of :mod:`hbgear.engine.condensed`: ``A`` from the mean
+        periodic coefficients, ``U = (dR/dx - A)(C^T (x) I)`` from the port parts of ``K(s)``,
+        ``C(s)`` and ``m`` directional derivatives of ``Q_nl`` (``C`` orthonormal rows)."""
+        n, H, B = self.ndof, self.harmonics, self.block
+        pieces = prepared.condensed
+        right = pieces.ports.T  # (n, m)
+        m = right.shape[1]
+        w = self.base_frequency(system, p)
+        scale = system.displacement_scale / system.force_scale
+        k_bar, c_bar, k_ports, c_ports = self._port_operator(system, p, prepared)
+        u = k_ports + w * c_ports
+        if not system.is_linear:
+            x, extra = self._split(system, z)
+            t_q, t_v, g_q, g_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, right)
+            # A holds the mean derivatives of Q_nl too (a mesh that is all nonlinear, backlash,
+            # leaves Kb no stiffness on its coordinate): the mean Jacobian, as the structured
+            # path's preconditioner
+            k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
+
+            def flat(b):
+                return jnp.transpose(b, (0, 2, 1, 3)).reshape(n * B, m * B)
+
+            u = u - flat(t_q) - self._times_derivative(flat(t_v), system, p, m)
+        u = u * scale
+        mass = system.mass_matrix(p, jnp)
+        kw = w * jnp.arange(1, H + 1)[:, None, None]
+        diagonal = k_bar[None] - kw**2 * mass[None]
+        coupling = kw * c_bar[None]
+        blocks = jnp.concatenate([jnp.concatenate([diagonal, coupling], axis=2),
+                                  jnp.concatenate([-coupling, diagonal], axis=2)], axis=1) * scale
+        mean = k_bar * scale
+        keep = jnp.ones(n * B)
+        k = system.free_mean_dof
+        if k is not None:
+            mean = mean.at[:, k].set(0.0).at[k, k].set(1.0)
+            keep = keep.at[k * B].set(0.0)
+        return condensed.PortJacobian(mean, blocks, jnp.linalg.inv(mean), jnp.linalg.inv(blocks), u, pieces.ports,
+                                      keep)
+
+    def _nonlinear_port_blocks(self, x, extra, p, system, layout, right):
+        """``(T_q, T_v, Gb_q, Gb_v)``: :meth:`_nonlinear_jacobian`'s blocks times ``C^T (x) I``
+        ``(n, m, B, B)``, without the means ``Gb`` ``(n, m)`` of the sampled derivatives (returned
+        apart), from ``m`` directional derivatives (the columns of `right` ``(n, m)``)."""
+        n, H, N = self.ndof, self.harmonics, self.samples
+        derivatives, (_, at_c, weight, delta) = self._nonlinear_derivatives(x, extra, p, system, layout, right)
+        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N
+        means = jnp.real(coeff[..., 0])  # (1|2, n, m)
+        coeff = jnp.concatenate([0.0 * coeff[..., :1], coeff[..., 1:]], axis=-1)
+        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, m, B, B)
+        blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, _jumps(derivatives[..., N:], weight), at_c)
+        uses_q = system.nonlinear_force_uses_displacement
+        t_q = blocks[0] if uses_q else jnp.zeros_like(blocks[0])
+        t_v = blocks[-1]
+        g_q = means[0] if uses_q else jnp.zeros_like(means[0])
+        g_v = means[-1]
+        if events.declared(system, p):
+            velocity = self._velocity(x, system, p)
+            e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
+                                            self.harmonics, self.nu, self.samples)
+            t_q = t_q + jnp.einsum("ijbd,jl->ilbd", e_q, right)
+            t_v = t_v + jnp.einsum("ijbd,jl->ilbd", e_v, right)
+        return t_q, t_v, g_q, g_v
 
     @partial(jax.jit, static_argnums=0)
     def _hill_matrices_jit(self, z, p, system, prepared):
@@ -725,11 +877,15 @@ def residual_functions(hb: HarmonicBalance, system):
 @lru_cache(maxsize=16)
 def _functions_of(hb: HarmonicBalance):
     def residual_and_jacobians(z, p, system, prepared):
+        if prepared.condensed is not None:  # dR/dz as a PortJacobian (hbgear.engine.condensed)
+            return hb.residual_and_port_jacobians(jnp.asarray(z), p, system, prepared)
         return hb.residual_and_jacobians(jnp.asarray(z), p, system, prepared)
 
     def residual(z, p, system, prepared):
         return hb.residual(jnp.asarray(z), p, system, prepared)
 
+    # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled)
+    residual_and_jacobians.jacobian_is_structured = lambda system, prepared: prepared.condensed is not None
     return residual_and_jacobians, residual
 
 

@@ -84,6 +84,15 @@ shapes returned, ``is_linear`` at a probe state):
   shape ``np.shape(p) + (t,)``; the multiplier nearest each, within
   :data:`~hbgear.engine.floquet.TRIVIAL_TOL`, is reported but left out of the stability verdict
   (default: none).
+- ``input_map(p)`` -- ``None`` (default) or a matrix ``C`` ``(m, ndof)``, the same for every ``p``,
+  with the promise that the force minus a linear time-invariant part, ``Q + K_0 q + C_0 q'`` for
+  some constant ``K_0``, ``C_0``, depends on the state only through ``C q`` and ``C q'`` (most of
+  a multi-DOF model is masses, springs and dampers; the time-varying, nonlinear terms see a few
+  combinations of the coordinates). The continuation corrector then solves its Newton steps on
+  the ``m (2H+1)`` ports instead of the ``ndof (2H+1)`` unknowns (:mod:`hbgear.engine.condensed`;
+  ``HarmonicBalance(operator="auto")`` chooses it when it pays off). Checked at a probe state:
+  moving the state along directions with ``C dq = C dq' = 0`` must change the force by the same
+  amount at every phase and state, and leave the event functions unchanged.
 - ``linearization()`` / ``in_linear_regime(hb, z, p)`` -- a linear system whose variational
   equations are this system's along every solution for which ``in_linear_regime`` is true (the
   gear pair with backlash while its teeth keep contact); there the exact monodromy of the linear
@@ -159,14 +168,18 @@ class PeriodicSystem:
         """Functions across whose zeros ``Q_nl`` may jump, shape ``(E,) + s.shape``, or ``None`` (default)."""
         return None
 
+    def input_map(self, p):
+        """``C`` ``(m, ndof)``: the combinations of the state the non-LTI force sees, or ``None`` (default)."""
+        return None
+
 
 def check_system(system, p) -> None:
     """Check `system` against the contract at parameter `p` (numpy; a few force evaluations).
 
     **Raises:** ``TypeError`` if it is not a :class:`PeriodicSystem`; ``ValueError`` naming the
     first broken rule: ``ndof`` not a positive integer, a mass matrix, force, derivative forcing or
-    event functions of the wrong shape or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array, or
-    ``is_linear = True`` with a nonzero nonlinear part.
+    event functions of the wrong shape or not finite, a ``free_mean_dof`` out of range, breakpoints not a finite 1-D array,
+    ``is_linear = True`` with a nonzero nonlinear part, or an ``input_map`` whose promise fails at a probe state.
     """
     if not isinstance(system, PeriodicSystem):
         raise TypeError(f"{type(system).__name__} is not a hbgear.PeriodicSystem (subclass it: the class "
@@ -206,6 +219,10 @@ def check_system(system, p) -> None:
         if np.max(np.abs(f)) > 1e-12 * float(system.force_scale):
             raise ValueError(f"{name}.is_linear is True but its nonlinear force part is {np.max(np.abs(f)):.3g} "
                              "at a probe state (declare is_linear = False)")
+    if system.input_map(p) is not None:
+        from .condensed import check_input_map
+
+        check_input_map(system, p)
 
 
 @register_dataclass

@@ -153,6 +153,26 @@ class GearSystem(PeriodicSystem):
         model, _ = self._at(p)
         return model.lti_step_forcing(s, xp)
 
+    def input_map(self, p):
+        """The combinations of the coordinates the mesh and friction see (the rest -- masses,
+        bearings, shafts, the output spring -- is linear time-invariant): ``delta``, and for NLTV
+        the sliding velocity's ``a_p``, ``a_g`` (unless the ``"torques"`` boundary fixes them at
+        nominal) and ``x_p - x_g`` (bearings). ``None`` unless the parameter is the speed (the
+        rows follow the masses through the ``"torques"`` projection)."""
+        if self.parameter != "speed":
+            return None
+        model = self.model
+        lay = model.layout
+        unit = np.eye(lay.ndof)
+        rows = [unit[0]]  # delta = q[0]
+        if model.coupling == "NLTV":
+            if lay.eliminated is None:
+                projection = model.projection()
+                rows += [np.asarray(projection["a_p"], dtype=float), np.asarray(projection["a_g"], dtype=float)]
+            if model.bearings is not None:
+                rows.append(unit[lay.index("x_p")] - unit[lay.index("x_g")])
+        return np.stack(rows)
+
     def event_functions(self, s, q, qd, p, xp=np):
         """Backlash with friction: the flank contacts ``x -+ b`` (:meth:`GearPairModel.contact_events`)."""
         model, omega = self._at(p)

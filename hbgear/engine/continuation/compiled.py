@@ -15,6 +15,11 @@ once, whatever the number of iterations or steps; the parameter scale ``p_ref`` 
 residual's extra ``args`` (the gear pair) are arguments of the program, so a new range or a new
 pair of the same structure does not recompile.
 
+The Jacobian ``R_z`` is a matrix, or an object with ``bordered_factor(column, row)`` (a
+:class:`~hbgear.engine.condensed.PortJacobian`: a factorisation with ``solve(b)``, and ``dense()``);
+then every LU of a bordered matrix below is that factorisation (:func:`_factor_bordered`,
+:func:`_solve_bordered`), the same algorithm on cheaper linear algebra.
+
 The loop states are NamedTuples (JAX pytrees). Their fields are declared in alphabetical order,
 the order in which JAX flattened the string-keyed dicts they replaced, so that the program is
 the same one, instruction for instruction (its optimized HLO equal up to names and metadata;
@@ -61,7 +66,8 @@ def _running(condition, count):
 
 
 class _Factor(NamedTuple):
-    """The LU of ``A = [J; previous]`` at the last converged point (for the chord mode)."""
+    """The LU of ``A = [J; previous]`` at the last converged point (for the chord mode); with a
+    structured Jacobian `lu` is its factorisation and `piv` unused."""
 
     lu: Any
     piv: Any
@@ -150,17 +156,63 @@ def _no_factor(size, previous, xp=jnp) -> _Factor:
                    xp.asarray(False))
 
 
+# ------------------------------------------------------------------------------ linear algebra
+def _structured(jz) -> bool:
+    return hasattr(jz, "bordered_factor")
+
+
+def _factor_bordered(jac, row):
+    """The factorisation of ``[jac; row]``: ``(lu, piv)`` of the matrix, or with a structured
+    ``jac = (R_z, column)`` its ``bordered_factor`` (and a placeholder pivot)."""
+    if isinstance(jac, tuple):
+        return jac[0].bordered_factor(jac[1], row), jnp.zeros(1, np.int32)
+    return jax.scipy.linalg.lu_factor(jnp.concatenate([jac, row[None]], axis=0))
+
+
+def _solve_bordered(lu, piv, b):
+    if _structured_factor(lu):
+        return lu.solve(b)
+    return jax.scipy.linalg.lu_solve((lu, piv), b)
+
+
+def _structured_factor(lu) -> bool:
+    return hasattr(lu, "solve")
+
+
+def _dense(jac):
+    """``[R_z, p_ref R_p]`` as a matrix."""
+    if isinstance(jac, tuple):
+        return jnp.concatenate([jac[0].dense(), jac[1][:, None]], axis=1)
+    return jac
+
+
+def _zeros_like_tree(shapes):
+    return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+
+def _jacobian_is_structured(residual_and_jacobians, size, args) -> bool:
+    """Whether ``R_z`` of these functions and `args` is structured: the functions' own
+    ``jacobian_is_structured(*args)`` when they have one (no trace), else an abstract evaluation."""
+    said = getattr(residual_and_jacobians, "jacobian_is_structured", None)
+    if said is not None:
+        return bool(said(*args))
+    return _structured(jax.eval_shape(lambda a: residual_and_jacobians(jnp.zeros(size), 1.0, *a)[1], tuple(args)))
+
+
 # ------------------------------------------------------------------------------ evaluations
 def _evaluate(eq: _Equations, y):
-    """``(R, [R_z, p_ref R_p])`` at ``y = (z, p / p_ref)``.
+    """``(R, [R_z, p_ref R_p])`` at ``y = (z, p / p_ref)`` (a structured ``R_z``: the pair
+    ``(R_z, p_ref R_p)``).
 
     The callables are traced in ``(z, p, *args)``: `args` are arguments of the compiled program
     (the gear pair and its quadrature for :func:`hbgear.engine.hb.residual_functions`),
     whatever they close over is a constant in it."""
     size = eq.size
     r, jz, jp = eq.residual_and_jacobians(y[:-1], y[-1] * eq.scale, *eq.args)
-    jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size),
-                           eq.scale * jnp.asarray(jp, dtype=float).reshape(size, 1)], axis=1)
+    column = eq.scale * jnp.asarray(jp, dtype=float).reshape(size)
+    if _structured(jz):
+        return jnp.asarray(r, dtype=float).reshape(size), (jz, column)
+    jac = jnp.concatenate([jnp.asarray(jz, dtype=float).reshape(size, size), column[:, None]], axis=1)
     return jnp.asarray(r, dtype=float).reshape(size), jac
 
 
@@ -177,12 +229,12 @@ def _constraint_ok(eq: _Equations, y):
 def _tangent_and_factor(jac, previous):
     """Unit tangent from ``[J; previous] t = e`` (SVD null vector if that LU is unusable),
     oriented along `previous`, and that LU as the next chord :class:`_Factor`."""
-    unit_last = np.zeros(jac.shape[0] + 1)
+    unit_last = np.zeros(previous.shape[0])
     unit_last[-1] = 1.0
-    lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([jac, previous[None]], axis=0))
-    raw = jax.scipy.linalg.lu_solve((lu, piv), unit_last)
+    lu, piv = _factor_bordered(jac, previous)
+    raw = _solve_bordered(lu, piv, unit_last)
     ok = jnp.all(jnp.isfinite(raw))
-    t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(jac)[2][-1])
+    t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(_dense(jac))[2][-1])
     t = t / jnp.linalg.norm(t)
     return jnp.where(t @ previous >= 0, t, -t), _Factor(lu, piv, raw, previous, ok)
 
@@ -191,7 +243,7 @@ def _tangent_and_factor(jac, previous):
 def _chord_step(eq: _Equations, chord: _Chord, y, r):
     """Modified Newton step with ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``:
     ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``, ``b = -(R, row . y - target)``."""
-    u = jax.scipy.linalg.lu_solve((chord.lu, chord.piv), -jnp.append(r, eq.row @ y - eq.target))
+    u = _solve_bordered(chord.lu, chord.piv, -jnp.append(r, eq.row @ y - eq.target))
     return y + u - chord.v * (chord.d @ u) / chord.denominator
 
 
@@ -230,8 +282,11 @@ def _take(eq: _Equations, s: _Iterate, r_c, jac_c, norm_c) -> _Iterate:
                                  jnp.where(it >= eq.max_iter, _MAX_ITERATIONS, RUNNING))).astype(jnp.int32)
 
     def newton_step(_):
-        a = jnp.concatenate([jac_c, eq.row[None]], axis=0)
-        step = jnp.linalg.solve(a, -jnp.append(r_c, residual_y))
+        if isinstance(jac_c, tuple):  # a structured R_z: its bordered factorisation
+            step = _solve_bordered(*_factor_bordered(jac_c, eq.row), -jnp.append(r_c, residual_y))
+        else:
+            a = jnp.concatenate([jac_c, eq.row[None]], axis=0)
+            step = jnp.linalg.solve(a, -jnp.append(r_c, residual_y))
         ok = jnp.all(jnp.isfinite(step))
         return jnp.where(ok, y + step, y), step, jnp.where(ok, RUNNING, _SINGULAR).astype(jnp.int32)
 
@@ -281,15 +336,24 @@ def _correct(eq: _Equations, previous, factor: _Factor):
     start_chord = factor.usable & (eq.max_iter > 0)
     r0 = jax.lax.cond(start_chord, lambda: _residual_of(eq, eq.y_pred), lambda: jnp.zeros(size))
     norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
-    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=jnp.zeros((size, size + 1)), norm=norm0,
+    if _jacobian_is_structured(eq.residual_and_jacobians, size, eq.args):
+        jac0 = _zeros_like_tree(jax.eval_shape(lambda y: _evaluate(eq, y)[1], eq.y_pred))
+    else:
+        jac0 = jnp.zeros((size, size + 1))
+    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=jac0, norm=norm0,
                     cand=eq.y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, CHORD, PREDICTOR).astype(i32),
                     status=jnp.asarray(RUNNING, i32), chord_it=jnp.asarray(0, i32))
     # (`it >= 0` always holds: see _running)
     s = jax.lax.while_loop(lambda s: _running(s.status < 0, s.it),
                            lambda s: jax.lax.cond(s.mode == CHORD, lambda s: _chord_turn(eq, chord, s),
                                                   lambda s: _newton_turn(eq, s), s), init)
-    t, new_factor = jax.lax.cond(s.status == _CONVERGED, lambda: _tangent_and_factor(s.jac, previous),
-                                 lambda: (jnp.full(size + 1, jnp.nan), _no_factor(size, previous)))
+    def failed():
+        if not isinstance(s.jac, tuple):
+            return jnp.full(size + 1, jnp.nan), _no_factor(size, previous)
+        _, empty = _zeros_like_tree(jax.eval_shape(lambda: _tangent_and_factor(s.jac, previous)))
+        return jnp.full(size + 1, jnp.nan), empty._replace(previous=previous, usable=jnp.asarray(False))
+
+    t, new_factor = jax.lax.cond(s.status == _CONVERGED, lambda: _tangent_and_factor(s.jac, previous), failed)
     return s.y, s.norm, s.it, s.chord_it, s.status, t, new_factor
 
 
@@ -343,8 +407,19 @@ def _jit_corrector(residual_and_jacobians, residual, size):
     """
     problem = (residual_and_jacobians, residual, size)
 
-    def no_factor(previous, xp=jnp):
-        return _no_factor(size, previous, xp)
+    def no_factor(previous, xp=jnp, args=()):
+        """An unusable factorisation: zeros of the dense LU's shape or, when the Jacobian of these
+        `args` is structured, of its factorisation's (found by an abstract evaluation)."""
+        if not _jacobian_is_structured(residual_and_jacobians, size, args):
+            return _no_factor(size, previous, xp)
+
+        def factor(a, prev):
+            eq = _Equations(*problem, 1.0, a, prev, prev, 0.0, 0, 0.0)
+            lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
+            return lu
+
+        lu = _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
+        return _Factor(lu, jnp.zeros(1, np.int32), jnp.zeros(size + 1), previous, jnp.asarray(False))
 
     @jax.jit
     def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
@@ -396,7 +471,7 @@ class _Compiled:
             return self.last
         # "no factorisation": device-resident zeros made once, only `previous` changes
         if self.empty is None:
-            self.empty = self.no_factor(jnp.asarray(previous, dtype=float))
+            self.empty = self.no_factor(jnp.asarray(previous, dtype=float), args=self.args)
         return self.empty._replace(previous=np.asarray(previous, dtype=float))
 
     def _run(self, y_pred, row, target, previous, max_iter, tolerance, y0, t0, ds0, budget):

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..condensed import as_matrix
 from ..newton import NewtonStatus, newton
 from .steps import _tangent
 
@@ -64,7 +65,7 @@ def _python_corrector(residual_and_jacobians, residual, scale, size):
         """``(R, A)``: ``A`` the bordered matrix ``[[R_z, R_p p_ref], [.]]``, last row unset."""
         r, jz, jp = residual_and_jacobians(y[:-1], float(y[-1] * scale))
         a = np.empty((size + 1, size + 1), order="F")
-        a[:size, :size] = np.asarray(jz, dtype=float)
+        a[:size, :size] = np.asarray(as_matrix(jz), dtype=float)  # a structured R_z as a matrix
         a[:size, size] = scale * np.asarray(jp, dtype=float).reshape(-1)
         return np.asarray(r, dtype=float), a
 

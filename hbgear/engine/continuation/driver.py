@@ -13,6 +13,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..condensed import as_matrix
 from ..newton import newton
 from .branch import MESSAGES, Branch, PointKind, Status
 from .compiled import _JIT_CACHE, SegmentControls, _cached_jit_corrector, _Compiled
@@ -33,6 +34,11 @@ def _caller_stacklevel() -> int:
     while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE):
         frame, level = frame.f_back, level + 1
     return level
+
+
+def _dense_pair(evaluation):
+    """``(R, R_z)`` of an evaluation ``(R, R_z, R_p)``, a structured ``R_z`` as a matrix."""
+    return evaluation[0], as_matrix(evaluation[1])
 
 
 class _Correctors:
@@ -163,7 +169,8 @@ class _Run:
                 first = self.correct(y_guess, fixed_p, p0 / scale, start_iterations, seed)  # or fall back
             first = first if isinstance(first, _Point) else None
         if first is None:
-            start = newton(lambda z: residual_and_jacobians(z, float(p0))[:2], lambda z: residual(z, float(p0)), z0,
+            start = newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p0))),
+                           lambda z: residual(z, float(p0)), z0,
                            tolerance=self.tolerance, max_iterations=start_iterations)
             if not start.converged:
                 return _Stop(Status.START_FAILED,

@@ -1,0 +1,202 @@
+"""The condensed path (a system's ``input_map``: Newton and continuation steps on the ports,
+:mod:`hbgear.engine.condensed`) against the dense path, the reference: the Jacobian, the residual
+and the bordered solves at a probe state, the continuation curves of the gear pair on bearings
+and shafts (6 and 8 DOF, LTV and NLTV), the probe check of a wrong declaration, and a system
+written here that is not a gear pair."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hbgear import build_model
+from hbgear.config import parse_config, read_toml
+from hbgear.engine.system import PeriodicSystem
+from hbgear.engine.condensed import as_matrix, check_input_map
+from hbgear.engine.continuation import continuation, sweep_method
+from hbgear.engine.hb import HarmonicBalance, residual_functions
+from hbgear.engine.system import check_system
+from hbgear.gear.solve import rpm_to_rad_s
+from hbgear.gear.system import GearSystem
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "bearings.toml"
+SHAFTS = dict(drive_inertia_kgm2=5e-3, load_inertia_kgm2=1e-2, drive_stiffness_Nm_per_rad=2e5,
+              load_stiffness_Nm_per_rad=3e5, damping_ratio=0.02)
+H, SAMPLES = 4, 64
+COUPLINGS = {"LTV": [], "NLTV": ["friction.model=NLTV", "friction.law=arctan"]}
+
+
+def gear(dof, coupling, *overrides):
+    data = read_toml(EXAMPLE)
+    if dof == 8:
+        data["shafts"] = dict(SHAFTS)
+    return GearSystem(build_model(parse_config(data, list(COUPLINGS[coupling]) + list(overrides))))
+
+
+def both(system, harmonics=H, samples=SAMPLES):
+    """``(dense, condensed)``: each ``(hb, residual_and_jacobians, residual, args)``."""
+    out = []
+    for operator in ("dense", "condensed"):
+        hb = HarmonicBalance(system.ndof, harmonics, 1, samples, operator=operator)
+        out.append((hb, *residual_functions(hb, system)))
+    return out
+
+
+CASES = [(6, "LTV", ("mesh.backlash_um=20", "boundary.output=reaction")), (8, "NLTV", ()),
+         (6, "LTV", ("boundary.output=torques", "friction.formulation=B"))]
+
+
+@pytest.mark.parametrize("dof, coupling, overrides", CASES)
+def test_port_jacobian_residual_and_bordered_solve_are_the_dense_ones(dof, coupling, overrides):
+    """At a random state (large enough to open a backlash): ``A + U V^T`` is the dense Jacobian,
+    the residual and ``dR/dp`` are the dense path's to 1e-12, and the Woodbury solve of the
+    bordered system solves the dense bordered matrix (backward error 1e-13)."""
+    system = gear(dof, coupling, *overrides)
+    (hb, rj_d, _, args_d), (_, rj_c, r_c, args_c) = both(system)
+    assert args_d[1].condensed is None and args_c[1].condensed is not None
+    p = rpm_to_rad_s(5000.0)
+    z = jnp.asarray(np.random.default_rng(0).standard_normal(hb.size))
+    r1, j1, p1 = (np.asarray(a) for a in rj_d(z, p, *args_d))
+    r2, j2, p2 = rj_c(z, p, *args_c)
+    dense = np.asarray(as_matrix(j2))
+    assert np.max(np.abs(dense - j1)) <= 1e-12 * np.max(np.abs(j1))
+    assert np.max(np.abs(np.asarray(r2) - r1)) <= 1e-12 * np.max(np.abs(r1))
+    assert np.max(np.abs(np.asarray(p2) - p1)) <= 1e-12 * np.max(np.abs(p1))
+    assert np.allclose(np.asarray(r_c(z, p, *args_c)), np.asarray(r2), rtol=0, atol=1e-13 * np.max(np.abs(r1)))
+    rng = np.random.default_rng(1)
+    column, row, b = rng.standard_normal(hb.size), rng.standard_normal(hb.size + 1), rng.standard_normal(hb.size + 1)
+    x = np.asarray(j2.bordered_factor(jnp.asarray(column), jnp.asarray(row)).solve(jnp.asarray(b)))
+    bordered = np.block([[j1, column[:, None]], [row[None]]])
+    # normwise backward error (the soft output spring makes the k = 0 block conditioned ~5e5)
+    scale = np.max(np.sum(np.abs(bordered), axis=1)) * np.max(np.abs(x)) + np.max(np.abs(b))
+    assert np.max(np.abs(bordered @ x - b)) <= 1e-13 * scale
+
+
+@pytest.mark.parametrize("dof, coupling", [(6, "LTV"), (8, "NLTV")])
+def test_continuation_curves_are_the_dense_ones(dof, coupling):
+    """The compiled chord corrector on the ports follows the dense LU's curve: the same points
+    (parameter and unknowns) to 1e-10 relative while both take the same iterations -- a Newton
+    count can flip where a residual lands next to the tolerance (rounding), after which the
+    step sizes, not the curve, differ -- and every condensed point is a solution of the dense
+    equations: its residual within the tolerance, a dense Newton step from it as small as from
+    the dense path's own points."""
+    system = gear(dof, coupling)
+    p0, p1 = rpm_to_rad_s(4000.0), rpm_to_rad_s(4600.0 if coupling == "NLTV" else 5000.0)
+    tolerance = 1e-11
+    branches, functions = [], []
+    for hb, rj, r, args in both(system):
+        functions.append((rj, args))
+        branches.append(continuation(rj, r, np.zeros(hb.size), p0, p1, sweep_method(p0, p1, None), args=args,
+                                     tolerance=tolerance, progress=False))
+    dense, port = branches
+    assert dense.success and port.success and len(port.p) > 20
+    n = min(len(dense.p), len(port.p))
+    flips = (dense.iterations[:n] != port.iterations[:n]) | ~np.isclose(dense.ds[:n], port.ds[:n], rtol=1e-9, atol=0)
+    same = int(np.argmax(flips)) if np.any(flips) else n
+    if coupling == "LTV":  # linear: one solve per point, nothing to flip
+        assert same == len(dense.p) == len(port.p)
+    assert same > 20
+    scale = np.max(np.abs(dense.z))
+    assert np.max(np.abs(dense.p[:same] - port.p[:same])) <= 1e-10 * np.max(np.abs(dense.p))
+    assert np.max(np.abs(dense.z[:same] - port.z[:same])) <= 1e-10 * scale
+    rj, args = functions[0]
+
+    def newton_steps(branch):  # max|R| and the dense Newton step at each point (dense equations)
+        out = []
+        for p, z in zip(branch.p, branch.z):
+            r, jac, _ = (np.asarray(a) for a in rj(jnp.asarray(z), p, *args))
+            out.append((np.max(np.abs(r)), np.max(np.abs(np.linalg.solve(jac, r)))))
+        return np.array(out)
+
+    own, other = newton_steps(dense), newton_steps(port)
+    assert np.max(other[:, 0]) <= tolerance
+    # as close to the dense equations' solutions as the dense path's own points (at 1e-11)
+    assert np.max(other[:, 1]) <= max(1e-10 * scale, 2.0 * np.max(own[:, 1]))
+
+
+def test_auto_takes_the_condensed_path_only_where_it_pays():
+    """``operator="auto"``: the 8-DOF pair at H = 32 is condensed, the 2-DOF pair (nothing to
+    condense at 130 unknowns) and any system without an input map stay dense."""
+    system = gear(8, "LTV")
+    assert HarmonicBalance(8, 32, 1, 256).prepare(system).condensed is not None
+    assert HarmonicBalance(8, 32, 1, 256).prepare(gear(8, "NLTV")).condensed is not None  # 4 ports: 262 of 520
+    assert HarmonicBalance(8, 32, 1, 256, operator="dense").prepare(system).condensed is None
+    data = read_toml(EXAMPLE)
+    del data["bearings"]
+    rigid = GearSystem(build_model(parse_config(data)))
+    assert HarmonicBalance(2, 32, 1, 256).prepare(rigid).condensed is None
+    assert GearSystem(system.model, parameter="torque_pinion_Nm").input_map(1.0) is None
+
+
+def test_a_wrong_input_map_is_refused():
+    """NLTV friction sees the centre and rotation speeds: declaring only ``delta`` breaks the
+    promise, and the probe says so (``check_system`` and the forced condensed path)."""
+
+    @jax.tree_util.register_dataclass
+    @dataclasses.dataclass(frozen=True)
+    class OnlyDelta(GearSystem):
+        def input_map(self, p):
+            return np.eye(self.ndof)[:1]
+
+    honest = gear(8, "NLTV")
+    check_input_map(honest, rpm_to_rad_s(5000.0))
+    wrong = OnlyDelta(honest.model)
+    with pytest.raises(ValueError, match="input_map"):
+        check_system(wrong, rpm_to_rad_s(5000.0))
+    with pytest.raises(ValueError, match="input_map"):
+        HarmonicBalance(8, H, 1, SAMPLES, operator="condensed").prepare(wrong)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Chain(PeriodicSystem):
+    """Four masses in a chain on springs and dampers, the first with a parametric cubic spring to
+    the ground and a harmonic force: only ``q[0]`` is seen by the non-LTI force."""
+
+    forcing: float = 1.0
+    ndof = 4
+    is_linear = False
+    coefficients_independent_of_parameter = True
+
+    def mass_matrix(self, p, xp=np):
+        return xp.diag(xp.asarray([1.0, 2.0, 1.5, 1.0]))
+
+    def excitation_frequency(self, p):
+        return p
+
+    def force(self, s, q, qd, p, part, extra, xp=np):
+        k, c = 1.0, 0.03
+        spring = [-(k * (q[0] - q[1]) + c * (qd[0] - qd[1]))]
+        for i in (1, 2):
+            spring.append(k * (q[i - 1] - q[i]) + c * (qd[i - 1] - qd[i])
+                          - k * (q[i] - q[i + 1]) - c * (qd[i] - qd[i + 1]))
+        spring.append(k * (q[2] - q[3]) + c * (qd[2] - qd[3]) - 0.5 * q[3] - c * qd[3])
+        ground = -(1.0 + 0.3 * xp.cos(2 * np.pi * s)) * q[0] + self.forcing * xp.cos(2 * np.pi * s)
+        linear = xp.stack([spring[0] + ground] + spring[1:])
+        nonlinear = xp.stack([-0.2 * q[0] ** 3] + [0.0 * q[0]] * 3)
+        return {"linear": linear, "nonlinear": nonlinear, "all": linear + nonlinear}[part]
+
+    def input_map(self, p):
+        return np.eye(4)[:1]
+
+
+def test_a_system_that_is_not_a_gear_pair():
+    """The engine knows nothing of gears: a chain with one nonlinear, parametric port, continued
+    on the dense and on the condensed path (forced: it is small), gives the same curve."""
+    system = Chain()
+    check_system(system, 1.0)
+    branches = []
+    for operator in ("dense", "condensed"):
+        hb = HarmonicBalance(4, 5, 1, 64, operator=operator)
+        rj, r, args = residual_functions(hb, system)
+        assert (args[1].condensed is not None) == (operator == "condensed")
+        branches.append(continuation(rj, r, np.zeros(hb.size), 0.6, 1.4, sweep_method(0.6, 1.4, None), args=args,
+                                     tolerance=1e-11, progress=False))
+    dense, port = branches
+    assert dense.success and port.success and len(dense.p) == len(port.p) > 10
+    assert np.max(np.abs(dense.z - port.z)) <= 1e-10 * np.max(np.abs(dense.z))
