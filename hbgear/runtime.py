@@ -1,11 +1,12 @@
-"""Opt-in process settings that make hbgear fast: one XLA thread, a disk cache, freed memory kept.
+"""Opt-in process settings that make hbgear fast: one XLA thread, one BLAS thread, a disk cache,
+freed memory kept.
 
 ``import hbgear`` changes none of these; the ``hbgear`` command calls :func:`configure` before it
 computes anything, and a library user may call it too (before JAX creates its CPU client, i.e.
 before the first JAX computation of the process, for the thread setting to take effect)::
 
     import hbgear
-    hbgear.runtime.configure()            # one XLA thread, the disk compilation cache, glibc's thresholds
+    hbgear.runtime.configure()            # one XLA and one BLAS thread, the disk cache, glibc's thresholds
 
 - **One XLA thread.** A continuation step is ~340 small kernels; XLA:CPU hands independent ones
   to an intra-op pool of one thread per CPU, and on small kernels the hand-offs cost more than
@@ -13,6 +14,13 @@ before the first JAX computation of the process, for the thread setting to take 
   thread). JAX sizes that pool from the process's CPU affinity when it creates its CPU client,
   so the client is created under a one-CPU affinity, which is then restored for every thread
   (compilation keeps all cores: its threads are made later). Linux only.
+- **One BLAS thread.** The dense LU and eigen-decompositions (JAX's CPU LAPACK calls go to the
+  same OpenBLAS as SciPy's) are of a few hundred unknowns; OpenBLAS threads them from ~300 and
+  on a 2-core machine with anything else running the threads wait for each other: an LU of 391
+  unknowns took 196 ms (median of 20; minimum 14 ms) with the default threads, 3.7 ms with one;
+  a continuation point of the NLTV pair on bearings and shafts (8 DOF) cost 62x the 2-DOF point
+  with the default threads, 7x with one (``benchmarks/bench_bearings.py``). Hill's method limits
+  BLAS to one thread around its eigenproblems anyway.
 - **Disk compilation cache** (``~/.cache/hbgear/jax``, or ``$HBGEAR_CACHE_DIR``): a second run
   of the same problem structure starts without compiling.
 - **Freed memory kept for reuse** (glibc): blocks above 128 kB are otherwise ``mmap``-ed and
@@ -23,7 +31,8 @@ before the first JAX computation of the process, for the thread setting to take 
   threshold to 512 MB (``mallopt``), so such blocks come from the heap and stay mapped. Linux
   with glibc only.
 
-Environment: ``HBGEAR_RUNTIME_THREADS=default`` keeps JAX's pool; ``HBGEAR_NO_CACHE=1`` leaves the
+Environment: ``HBGEAR_RUNTIME_THREADS=default`` keeps JAX's pool; ``HBGEAR_BLAS_THREADS=default`` keeps
+OpenBLAS's threads; ``HBGEAR_NO_CACHE=1`` leaves the
 cache off; ``HBGEAR_MALLOC=default`` keeps glibc's thresholds.
 """
 
@@ -33,7 +42,8 @@ import os
 import warnings
 from pathlib import Path
 
-__all__ = ["configure", "enable_compilation_cache", "single_threaded_runtime", "keep_freed_memory", "default_cache_dir"]
+__all__ = ["configure", "enable_compilation_cache", "single_threaded_runtime", "single_thread_blas_runtime",
+           "keep_freed_memory", "default_cache_dir"]
 
 
 def default_cache_dir() -> Path:
@@ -106,6 +116,23 @@ def single_threaded_runtime() -> bool:
     return True
 
 
+_BLAS_LIMIT: list = []
+
+
+def single_thread_blas_runtime() -> bool:
+    """Limit the process's BLAS/LAPACK libraries (NumPy's and SciPy's OpenBLAS, which JAX's CPU
+    LAPACK calls use too) to one thread for the rest of the process (see the module docstring).
+    **Returns:** whether it was done: ``False`` with ``HBGEAR_BLAS_THREADS=default``."""
+    if os.environ.get("HBGEAR_BLAS_THREADS", "").strip().lower() == "default":
+        return False
+    if not _BLAS_LIMIT:
+        import scipy.linalg  # noqa: F401 -- loads SciPy's BLAS so that the limit reaches it
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS_LIMIT.append(ThreadpoolController().limit(limits=1, user_api="blas"))  # kept: never restored
+    return True
+
+
 #: ``mallopt`` parameters of glibc (malloc.h) and the values :func:`keep_freed_memory` sets.
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES = 64 << 20, 512 << 20
@@ -136,6 +163,7 @@ def configure(*, threads: bool = True, cache: bool = True, memory: bool = True) 
         done["cache_dir"] = None if directory is None else str(directory)
     if threads:
         done["single_thread"] = single_threaded_runtime()
+        done["single_thread_blas"] = single_thread_blas_runtime()
     if memory:
         done["keep_freed_memory"] = keep_freed_memory()
     return done

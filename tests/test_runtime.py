@@ -76,3 +76,28 @@ def test_keep_freed_memory_is_opt_in_and_can_be_declined():
     assert "'keep_freed_memory': True" in out
     out = _run("import hbgear; print(hbgear.runtime.configure(threads=False, cache=False))", HBGEAR_MALLOC="default")
     assert "'keep_freed_memory': False" in out
+
+
+@pytest.mark.parametrize("setting, expected", [("", "1"), ("default", "default")])
+def test_configure_limits_blas_to_one_thread_unless_declined(setting, expected):
+    """JAX's CPU LAPACK calls go to SciPy's OpenBLAS: after ``configure()`` every BLAS library of
+    the process runs one thread, also inside a compiled LU; ``HBGEAR_BLAS_THREADS=default`` keeps
+    the libraries' own thread counts."""
+    out = _run("""
+        import hbgear
+        from threadpoolctl import threadpool_info
+        import scipy.linalg
+        before = sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+        done = hbgear.runtime.configure(cache=False)
+        import jax.numpy as jnp
+        jnp.linalg.solve(jnp.eye(400) * 2.0, jnp.ones(400)).block_until_ready()
+        after = sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+        print(done["single_thread_blas"], before, after)
+    """, HBGEAR_BLAS_THREADS=setting)
+    done, rest = out.strip().splitlines()[-1].split(" ", 1)
+    before, after = (eval(part) for part in rest.replace("] [", "]|[").split("|"))
+    assert after, "no BLAS library found in the process"
+    if expected == "1":
+        assert done == "True" and set(after) == {1}
+    else:
+        assert done == "False" and after == before
