@@ -292,15 +292,10 @@ def jump_jacobian(system, p, extra, xc, vc, harmonics: int, nu: int, samples: in
         return _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics, nu, samples,
                               slope_q, slope_v)
 
-    blocks = []
-    for which in (0, 1):  # displacement, velocity coefficients
-        columns = []
-        for j in range(n):
-            unit = zero.at[j].set(1.0)
-            at = (unit, zero, zero, zero) if which == 0 else (zero, unit, zero, zero)
-            along = (zero, zero, unit, zero) if which == 0 else (zero, zero, zero, unit)
-            d = jax.jvp(contributions, (zero,) * 4, at)[1]  # (C, ndof, 2H+1)
-            d_rate = jax.jvp(contributions, (zero,) * 4, along)[1]
-            columns.append(jnp.einsum("cib,cd->ibd", d, basis) + jnp.einsum("cib,cd->ibd", d_rate, rate))
-        blocks.append(jnp.stack(columns, axis=1))  # (ndof_row, ndof_col, 2H+1, 2H+1)
-    return blocks[0], blocks[1]
+    # one linearisation, pushed along the 4 ndof unit directions at once (one traced copy of it)
+    _, linear = jax.linearize(contributions, zero, zero, zero, zero)
+    units = jnp.eye(4 * n).reshape(4 * n, 4, n)[..., None, None] * jnp.ones(located[0].shape)  # (4 ndof, 4, ndof, E, K)
+    d = jax.vmap(lambda u: linear(u[0], u[1], u[2], u[3]))(units)  # (4 ndof, C, ndof, 2H+1)
+    d = d.reshape(4, n, *d.shape[1:])  # (shift_q, shift_v, slope_q, slope_v), column coordinate
+    at = jnp.einsum("kjcib,cd->kijbd", d[:2], basis) + jnp.einsum("kjcib,cd->kijbd", d[2:], rate)
+    return at[0], at[1]  # each (ndof_row, ndof_col, 2H+1, 2H+1)
