@@ -309,7 +309,8 @@ def arclength_sizes(hb: HarmonicBalance, system, p) -> np.ndarray | None:
     """The system's :meth:`~hbgear.engine.system.PeriodicSystem.arclength_mean_scales` at `p` as
     sizes of the unknowns of `hb` ``(size,)`` (the means' slots; 1 elsewhere), or ``None`` when
     it declares none or all are 1."""
-    scales = system.arclength_mean_scales(p)
+    declared = getattr(system, "arclength_mean_scales", None)  # duck-typed systems may lack it
+    scales = None if declared is None else declared(p)
     if scales is None:
         return None
     scales = np.asarray(scales, dtype=float).reshape(hb.ndof)
