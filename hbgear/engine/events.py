@@ -28,9 +28,9 @@ of it, a relative ``O(1/N^2)`` of the correction). The slope correction matters 
 loss is born between two samples: the force removed over a pulse of width ``w`` is ``O(w^2)``
 (its ends are a jump ``c h'`` each, ``+-sqrt`` of the pulse's depth, and a steep ramp between),
 and with the jumps alone the ramp, unseen by the samples, left an error ``O(sqrt(depth)/N)``:
-a residual with an infinite derivative at the birth (measured: the continuation of
-``examples/iso_tip_relief.toml`` at 1139 rpm, H = 24, stopped there with Hill multipliers
-going to infinity, and Newton cycled between 1e-5 and 3e-9 at a birth at 9394 rpm, H = 32). At most :data:`MAX_CROSSINGS` sign changes (the first in time) and
+a residual with an infinite derivative at the birth. (A jump that stays finite as the pulse is
+born -- a load switched off at a finite value -- gives the exact residual itself such a
+derivative; no correction removes that.) At most :data:`MAX_CROSSINGS` sign changes (the first in time) and
 :data:`MAX_EXCURSIONS` excursions per function and base period are corrected; more stay
 ``O(1/N)``, and the residual then jumps where the set of corrected zeros changes (a Newton
 corrector cannot converge across such a jump).
