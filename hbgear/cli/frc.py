@@ -208,9 +208,19 @@ def run(config, args, out_dir) -> int:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "
             f"nu={so.subharmonic}) stopped at {curve.speed_rpm[curve.points - 1]:.6g} rpm: {curve.response.message}. "
-            f"The partial curve ({curve.points} points) was written to {out_dir / 'frc.csv'} with the status in frc.json")
+            f"{_corner_hint(curve.model)}The partial curve ({curve.points} points) was written to {out_dir / 'frc.csv'} with the status in frc.json")
     _report(curve, out_dir, time.perf_counter() - t0)
     return 0
+
+
+def _corner_hint(model) -> str:
+    """Why a relieved per-pair model with formulation A may stop (README, Limitations), or ``""``."""
+    if not (getattr(model.mesh, "per_pair", False) and not model.mesh_is_linear and model.formulation == "A"
+            and model.normal_loads == "compressive" and model.friction.name != "none"):
+        return ""
+    return ("With formulation A a pair's friction load (its static load) switches off at a finite value where the "
+            "pair opens, so where a contact loss is born the residual is not differentiable (a corner of the curve, "
+            "README 'Limitations'). ")
 
 
 FRC = register(Command(name="frc", help="frequency-response curve by arc-length continuation over [sweep] "

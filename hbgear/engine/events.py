@@ -8,20 +8,32 @@ phase, but its instant moves with the solution. Here, from the Fourier coefficie
 1. the zeros of each ``e_r(t)`` over the base period are bracketed by the sign changes on the
    ``N`` AFT samples and, for a short excursion between two samples that carries no sign change
    (the birth of a contact loss), by the extremum of ``e_r`` between them where its value there
-   has the other sign; they are located by Newton steps safeguarded by bisection in the bracket
+   has the other sign (the sampled extrema examined are those whose parabola through the three
+   samples comes nearest to, or past, zero); they are located by Newton steps safeguarded by bisection in the bracket
    on the trigonometric polynomial (the state at any ``t`` is exact), so ``t_c`` is smooth in the coefficients and a
    pulse shrinks to nothing continuously;
-2. the jump ``J_c = Q_nl(t_c + eps) - Q_nl(t_c - eps)`` (``eps`` = :data:`SIDE`) is measured;
-3. ``J_c (B_hat_c - P B_c)`` is added to the projection, ``B_c(t) = 1/2 - frac(t - t_c)`` the unit
-   sawtooth (exact coefficients ``B_hat_c``, ``P B_c`` those of its samples), as for the
-   breakpoints in :meth:`hbgear.engine.hb.HarmonicBalance._sample_points`.
+2. the jump ``J_c = Q_nl(t_c + eps) - Q_nl(t_c - eps)`` (``eps`` = :data:`SIDE`) is measured, and
+   the jump ``K_c`` of its time derivative ``dQ_nl/dt`` (a contact force is continuous but kinked
+   where it opens: ``k h`` with ``h`` through zero);
+3. ``J_c (B_hat_c - P B_c) + K_c (C_hat_c - P C_c)`` is added to the projection,
+   ``B_c(t) = 1/2 - frac(t - t_c)`` the unit sawtooth and ``C_c`` its zero-mean integral (exact
+   coefficients ``B_hat_c``, ``C_hat_c``; ``P B_c``, ``P C_c`` those of their samples), as for the
+   jumps at the breakpoints in :meth:`hbgear.engine.hb.HarmonicBalance._sample_points`.
 
 The corrected projection is continuous in the coefficients (a sample crossing ``t_c`` changes
-``P Q_nl`` and ``J_c P B_c`` alike) and errs at ``O(1/N^2)``; its derivative (through ``t_c`` and
-``J_c``) from ``2 ndof`` directional derivatives of the per-zero contributions
-(:func:`jump_jacobian`). At most :data:`MAX_CROSSINGS` sign changes and
-:data:`MAX_EXCURSIONS` excursions per function and base period are corrected (the first in time);
-more stay ``O(1/N)``.
+``P Q_nl`` and ``J_c P B_c`` alike) and errs at ``O(1/N^3)`` near the zeros; its derivative
+(through ``t_c``, ``J_c`` and ``K_c``) from ``2 ndof`` directional derivatives of the per-zero
+contributions (:func:`jump_jacobian`; ``K_c``'s dependence on ``q''`` at ``t_c`` is left out
+of it, a relative ``O(1/N^2)`` of the correction). The slope correction matters where a contact
+loss is born between two samples: the force removed over a pulse of width ``w`` is ``O(w^2)``
+(its ends are a jump ``c h'`` each, ``+-sqrt`` of the pulse's depth, and a steep ramp between),
+and with the jumps alone the ramp, unseen by the samples, left an error ``O(sqrt(depth)/N)``:
+a residual with an infinite derivative at the birth. (A jump that stays finite as the pulse is
+born -- a load switched off at a finite value -- gives the exact residual itself such a
+derivative; no correction removes that.) At most :data:`MAX_CROSSINGS` sign changes (the first in time) and
+:data:`MAX_EXCURSIONS` excursions per function and base period are corrected; more stay
+``O(1/N)``, and the residual then jumps where the set of corrected zeros changes (a Newton
+corrector cannot converge across such a jump).
 """
 
 from __future__ import annotations
@@ -37,10 +49,13 @@ from . import fourier
 __all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "declared", "crossings", "crossings_compiled",
            "jump_correction", "jump_jacobian", "state_at"]
 
-#: Sign changes located per event function and base period.
-MAX_CROSSINGS = 8
+#: Sign changes located per event function and base period. A relieved tooth pair near grazing
+#: contact (tip relief sized for the load) makes its event function wiggle about zero: 12 sign
+#: changes per mesh period were measured on ``examples/iso_tip_relief.toml`` at 1113 rpm (H = 24),
+#: where 8 left two jumps uncorrected and the residual jumped by 1e-6 as a third pair appeared.
+MAX_CROSSINGS = 32
 #: Excursions between two samples (two zeros each) located per event function and base period.
-MAX_EXCURSIONS = 2
+MAX_EXCURSIONS = 4
 #: Half-width of the base-period interval across which a jump is measured.
 SIDE = 1e-10
 _NEWTON_STEPS = 6
@@ -127,10 +142,18 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     step = jnp.where(e0 != e1, e0 - e1, 1.0)
     t = jnp.clip(lo + jnp.clip(e0 / step, 0.0, 1.0) / samples, lo, hi)
 
-    # excursions: a sample that is an extremum of its neighbours, all three of one sign
+    # excursions: a sample that is an extremum of its neighbours, all three of one sign; of
+    # those, the ones whose parabola through the three samples reaches nearest to (or past)
+    # zero, relative to the samples' size (the first in time would be any wiggle of e_r)
     rising, falling = e - before, after - e
     same = (positive == (before > 0)) & (positive == (after > 0))
-    j, candidate = first(same & (rising * falling < 0), MAX_EXCURSIONS)
+    extremum = same & (rising * falling < 0)
+    curvature = 0.5 * (after + before) - e
+    vertex = e - (0.5 * (after - before)) ** 2 / (4.0 * jnp.where(curvature != 0, curvature, 1.0))
+    reach = jnp.where(extremum, jnp.where(positive, vertex, -vertex) / (jnp.abs(e) + jnp.abs(curvature)), jnp.inf)
+    _, j = jax.lax.top_k(-reach, MAX_EXCURSIONS)
+    candidate = jnp.take_along_axis(extremum, j, axis=1)
+    j = jnp.where(candidate, j, 0)
     ext_lo, ext_hi = (j - 1) / samples, (j + 1) / samples
     slope_of = lambda tt: jax.jvp(lambda u: _own_events(system, p, xc, vc, nu, u), (tt,), (jnp.ones_like(tt),))[1]  # noqa: E731
     peak = jax.lax.stop_gradient(_newton(slope_of, j / samples, ext_lo, ext_hi))
@@ -155,16 +178,22 @@ def crossings_compiled(system, p, xc, vc, nu: int, samples: int):
     return crossings(system, p, xc, vc, nu, samples)
 
 
-def _sampled_sawtooth_projection(t, harmonics: int, samples: int):
-    """``P B_c`` of the sawtooths with unit jumps at base fractions `t` ``(C,)``: ``(C, 2H+1)``.
+def _sampled_projections(t, harmonics: int, samples: int):
+    """``(P B_c, P C_c)``, each ``(C, 2H+1)``: the projections of the samples of the sawtooths
+    ``B_c(t) = 1/2 - u`` (unit jump at ``t_c``) and of their zero-mean integrals
+    ``C_c(t) = -u^2/2 + u/2 - 1/12`` (unit jump of the slope at ``t_c``), ``u = frac(t - t_c)``,
+    at base fractions `t` ``(C,)``.
 
-    Between sample instants the samples ``1/2 - frac(t_i - t_c)`` grow with ``t_c`` at slope 1,
-    so ``d(P B_c)/dt_c`` is the unit mean: given explicitly, forward-mode derivatives skip the FFT.
+    Between sample instants the samples of ``B_c`` grow with ``t_c`` at slope 1 and those of
+    ``C_c`` at slope ``-B_c``, so ``d(P B_c)/dt_c`` is the unit mean and ``d(P C_c)/dt_c = -P B_c``:
+    given explicitly, forward-mode derivatives skip the FFT.
     """
     fixed = jax.lax.stop_gradient(t)
-    sawtooth = 0.5 - jnp.mod(jnp.arange(samples)[None] / samples - fixed[:, None], 1.0)
+    u = jnp.mod(jnp.arange(samples)[None] / samples - fixed[:, None], 1.0)
+    both = fourier.project(jnp.stack([0.5 - u, u * (0.5 - 0.5 * u) - 1.0 / 12.0]), harmonics, jnp)
     mean = jnp.zeros(2 * harmonics + 1).at[0].set(1.0)
-    return fourier.project(sawtooth, harmonics, jnp) + (t - fixed)[:, None] * mean[None]
+    shift = (t - fixed)[:, None]
+    return both[0] + shift * mean[None], both[1] - shift * both[0]
 
 
 def _basis(t, harmonics: int):
@@ -174,12 +203,15 @@ def _basis(t, harmonics: int):
                             .reshape(t.shape[0], 2 * harmonics)], axis=1)
 
 
-def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics: int, nu: int, samples: int):
-    """``J_c (B_hat_c - P B_c)`` per zero, shape ``(C, ndof, 2H+1)``, for the state shifted near
-    each zero by ``shift_q``, ``shift_v`` ``(ndof, E, K)`` (zero: the solution itself).
+def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics: int, nu: int, samples: int,
+                   slope_q=None, slope_v=None):
+    """``J_c (B_hat_c - P B_c) + K_c (C_hat_c - P C_c)`` per zero, shape ``(C, ndof, 2H+1)``, for
+    the state shifted near each zero by ``shift_q``, ``shift_v`` and its rate of change in time
+    (per unit base fraction) by ``slope_q``, ``slope_v``, each ``(ndof, E, K)`` (zero or ``None``:
+    the solution itself).
 
     The zero is moved by one Newton step on the shifted state from its located value, which
-    carries the implicit derivative ``dt_c = -de / e'``; the jump is measured across it.
+    carries the implicit derivative ``dt_c = -de / e'``; the jumps are measured across it.
     """
     t0, valid = located
     count = t0.shape[0]
@@ -194,17 +226,34 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
     value, slope = jax.jvp(own, (t0,), (jnp.ones_like(t0),))
     t = (t0 - jnp.where(valid, value / jnp.where(slope != 0, slope, 1.0), 0.0)).ravel()
     sides = jnp.concatenate([t + SIDE, t - SIDE])
-    q, qd = state_at(xc, vc, sides)
-    q = q + jnp.tile(shift_q.reshape(q.shape[0], -1), 2)
-    qd = qd + jnp.tile(shift_v.reshape(qd.shape[0], -1), 2)
-    force = system.force(jnp.mod(sides * nu, 1.0), q, qd, p, "nonlinear", extra, jnp)
+    def both_sides(a):
+        return 0.0 if a is None else jnp.tile(a.reshape(xc.shape[0], -1), 2)
+
+    shift_q2, shift_v2, slope_q2, slope_v2 = (both_sides(a) for a in (shift_q, shift_v, slope_q, slope_v))
+
+    def force_at(u):  # Q_nl along the solution at base fractions u (the shifted state)
+        q, qd = state_at(xc, vc, u)
+        du = u - jax.lax.stop_gradient(u)  # zero, with a unit derivative: the slopes' lever
+        q, qd = q + shift_q2 + du * slope_q2, qd + shift_v2 + du * slope_v2
+        return system.force(jnp.mod(u * nu, 1.0), q, qd, p, "nonlinear", extra, jnp)
+
+    force, rate = jax.jvp(force_at, (sides,), (jnp.ones_like(sides),))  # Q_nl and dQ_nl/dt
     size = t.shape[0]
-    jump = jnp.where(valid.ravel()[None], force[:, :size] - force[:, size:], 0.0)  # (ndof, C)
+    mask = valid.ravel()[None]
+    jump = jnp.where(mask, force[:, :size] - force[:, size:], 0.0)  # (ndof, C)
+    kink = jnp.where(mask, rate[:, :size] - rate[:, size:], 0.0)
     k = jnp.arange(1, harmonics + 1)
     angle = 2 * np.pi * t[:, None] * k[None]
-    exact = jnp.concatenate([jnp.zeros((size, 1)), jnp.stack([-jnp.sin(angle) / (np.pi * k), jnp.cos(angle) / (np.pi * k)],
-                                                             axis=-1).reshape(size, 2 * harmonics)], axis=1)
-    return jump.T[:, :, None] * (exact - _sampled_sawtooth_projection(t, harmonics, samples))[:, None]
+    sin, cos = jnp.sin(angle), jnp.cos(angle)
+
+    def real(a, b):
+        return jnp.concatenate([jnp.zeros((size, 1)), jnp.stack([a, b], axis=-1).reshape(size, 2 * harmonics)], axis=1)
+
+    exact = real(-sin / (np.pi * k), cos / (np.pi * k))
+    exact2 = real(-cos / (2 * (np.pi * k) ** 2), -sin / (2 * (np.pi * k) ** 2))
+    sawtooth, parabola = _sampled_projections(t, harmonics, samples)
+    return (jump.T[:, :, None] * (exact - sawtooth)[:, None]
+            + kink.T[:, :, None] * (exact2 - parabola)[:, None])
 
 
 def jump_correction(system, p, extra, xc, vc, harmonics: int, nu: int, samples: int):
@@ -223,10 +272,11 @@ def jump_jacobian(system, p, extra, xc, vc, harmonics: int, nu: int, samples: in
     ``q'``: two arrays ``(ndof, ndof, 2H+1, 2H+1)`` (row coordinate, column coordinate, row
     coefficient, column coefficient), or ``None`` without event functions.
 
-    The correction depends on the coefficients only through the state near each zero
-    (``x(t) = x @ basis(t)``, the same shift over the ``2 SIDE`` of a jump), so each block is
-    ``sum_c dC_c/d(state_j) basis(t_c)``: ``2 ndof`` directional derivatives of the per-zero
-    contributions instead of one per coefficient.
+    The correction depends on the coefficients only through the state near each zero and its
+    rate of change there (``x(t) = x @ basis(t)``, ``x'(t) = x @ basis'(t)``, the same over the
+    ``2 SIDE`` of a jump), so each block is ``sum_c [dC_c/d(state_j) basis(t_c) + dC_c/d(rate_j)
+    basis'(t_c)]``: ``4 ndof`` directional derivatives of the per-zero contributions instead of
+    one per coefficient.
     """
     located = crossings(system, p, xc, vc, nu, samples)
     if located is None:
@@ -234,18 +284,18 @@ def jump_jacobian(system, p, extra, xc, vc, harmonics: int, nu: int, samples: in
     located = jax.lax.stop_gradient(located)
     n = xc.shape[0]
     zero = jnp.zeros((n,) + located[0].shape)
-    basis = _basis(located[0].ravel(), harmonics)  # (C, 2H+1)
+    t_c = located[0].ravel()
+    basis = _basis(t_c, harmonics)  # (C, 2H+1)
+    rate = jax.jvp(lambda u: _basis(u, harmonics), (t_c,), (jnp.ones_like(t_c),))[1]  # d basis / dt
 
-    def contributions(shift_q, shift_v):
-        return _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics, nu, samples)
+    def contributions(shift_q, shift_v, slope_q, slope_v):
+        return _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonics, nu, samples,
+                              slope_q, slope_v)
 
-    blocks = []
-    for which in (0, 1):
-        columns = []
-        for j in range(n):
-            unit = zero.at[j].set(1.0)
-            tangent = (unit, zero) if which == 0 else (zero, unit)
-            d = jax.jvp(contributions, (zero, zero), tangent)[1]  # (C, ndof, 2H+1)
-            columns.append(jnp.einsum("cib,cd->ibd", d, basis))
-        blocks.append(jnp.stack(columns, axis=1))  # (ndof_row, ndof_col, 2H+1, 2H+1)
-    return blocks[0], blocks[1]
+    # one linearisation, pushed along the 4 ndof unit directions at once (one traced copy of it)
+    _, linear = jax.linearize(contributions, zero, zero, zero, zero)
+    units = jnp.eye(4 * n).reshape(4 * n, 4, n)[..., None, None] * jnp.ones(located[0].shape)  # (4 ndof, 4, ndof, E, K)
+    d = jax.vmap(lambda u: linear(u[0], u[1], u[2], u[3]))(units)  # (4 ndof, C, ndof, 2H+1)
+    d = d.reshape(4, n, *d.shape[1:])  # (shift_q, shift_v, slope_q, slope_v), column coordinate
+    at = jnp.einsum("kjcib,cd->kijbd", d[:2], basis) + jnp.einsum("kjcib,cd->kijbd", d[2:], rate)
+    return at[0], at[1]  # each (ndof_row, ndof_col, 2H+1, 2H+1)

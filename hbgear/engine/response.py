@@ -13,9 +13,10 @@ through -1) and, when asked, follows the ``nu = 2`` branches born there
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass, field, replace
+from functools import cached_property, lru_cache
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..errors import ConvergenceError
@@ -284,10 +285,16 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     the `start` callable (``p -> z``, e.g. a staged solve) gives a converged start point."""
     rj, r, fixed = residual_functions(hb, system)
     method = sweep_method(p0, p1, step)
+    sizes = arclength_sizes(hb, system, p0)
+    if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
+        rj, r = _sized_functions_of(hb)
+        fixed = (*fixed, sizes)
 
     def run(z, iterations):
-        return continuation(rj, r, z, p0, p1, method, max_points=max_points, tolerance=tolerance,
-                            progress=progress, args=fixed, start_iterations=iterations)
+        z = np.asarray(z, dtype=float) if sizes is None else np.asarray(z, dtype=float) / sizes
+        branch = continuation(rj, r, z, p0, p1, method, max_points=max_points, tolerance=tolerance,
+                              progress=progress, args=fixed, start_iterations=iterations)
+        return branch if sizes is None else replace(branch, z=branch.z * sizes)
 
     if z0 is not None:
         branch = run(z0, max_iterations)
@@ -296,6 +303,38 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     if start is None:
         return run(np.zeros(hb.size), max_iterations)
     return run(start(p0), 10)
+
+
+def arclength_sizes(hb: HarmonicBalance, system, p) -> np.ndarray | None:
+    """The system's :meth:`~hbgear.engine.system.PeriodicSystem.arclength_mean_scales` at `p` as
+    sizes of the unknowns of `hb` ``(size,)`` (the means' slots; 1 elsewhere), or ``None`` when
+    it declares none or all are 1."""
+    declared = getattr(system, "arclength_mean_scales", None)  # duck-typed systems may lack it
+    scales = None if declared is None else declared(p)
+    if scales is None:
+        return None
+    scales = np.asarray(scales, dtype=float).reshape(hb.ndof)
+    if not np.all(np.isfinite(scales) & (scales > 0)):
+        raise ValueError(f"{type(system).__name__}.arclength_mean_scales: positive finite numbers, got {scales}")
+    if np.all(scales == 1.0):
+        return None
+    sizes = np.ones(hb.size)
+    sizes[np.arange(hb.ndof) * hb.block] = scales
+    return sizes
+
+
+@lru_cache(maxsize=16)
+def _sized_functions_of(hb: HarmonicBalance):
+    """:func:`~hbgear.engine.hb.residual_functions` in the unknowns ``y = z / sizes`` (`sizes`
+    the last extra argument): ``R(sizes y)`` and its Jacobian ``R_z diag(sizes)``."""
+    def residual_and_jacobians(y, p, system, prepared, sizes):
+        res, jz, jp = hb.residual_and_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
+        return res, jz * sizes[None, :], jp
+
+    def residual(y, p, system, prepared, sizes):
+        return hb.residual(jnp.asarray(y) * sizes, p, system, prepared)
+
+    return residual_and_jacobians, residual
 
 
 def _period_doubling_candidates(multipliers) -> tuple[list[int], np.ndarray]:

@@ -93,6 +93,13 @@ shapes returned, ``is_linear`` at a probe state):
   ``HarmonicBalance(operator="auto")`` chooses it when it pays off). Checked at a probe state:
   moving the state along directions with ``C dq = C dq' = 0`` must change the force by the same
   amount at every phase and state, and leave the event functions unchanged.
+- ``arclength_mean_scales(p)`` -- ``None`` (default) or, shape ``(ndof,)``, the size of each
+  coordinate's mean (in units of ``displacement_scale``) that counts as one unit of arclength in
+  continuation; 1 leaves a coordinate as it is. A coordinate on a support far softer than the
+  rest (e.g. a soft spring standing for a free rotation) whose mean follows a force that
+  depends on the response moves by that much more per step: in plain scaled unknowns it alone
+  fills the arclength and the steps crawl in ``p``. Only the metric of the continuation
+  changes (its unknowns are the means divided by these sizes), not the solutions.
 - ``linearization()`` / ``in_linear_regime(hb, z, p)`` -- a linear system whose variational
   equations are this system's along every solution for which ``in_linear_regime`` is true (the
   gear pair with backlash while its teeth keep contact); there the exact monodromy of the linear
@@ -154,6 +161,11 @@ class PeriodicSystem:
         """Known neutral multipliers over the base period (``nu`` excitation periods), shape
         ``np.shape(p) + (t,)``; none by default."""
         return np.zeros(np.shape(p) + (0,), dtype=complex)
+
+    def arclength_mean_scales(self, p):
+        """Sizes of the coordinates' means that count as one unit of arclength (module doc);
+        ``None``: the scaled unknowns as they are."""
+        return None
 
     def linearization(self) -> PeriodicSystem | None:
         """The linear system whose variational equations are this one's in its linear regime."""
