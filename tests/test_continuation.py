@@ -468,3 +468,26 @@ def test_compiled_line_search_equals_the_python_corrector():
             assert a.iterations >= 4 and abs(b.y[0] - np.tan(0.3) / 5) <= 1e-12
         else:
             assert a.reason == b.reason
+
+
+def test_formulation_b_on_the_spring_does_not_crawl():
+    """LTV-B on the soft output spring: the mean friction torque follows the response and the
+    spring's mean wind-up follows it ``spring_stiffness_ratio`` (5e5) times more than the mesh.
+    Counted in units of the spring's force (``GearSystem.arclength_mean_scales``) it no longer
+    fills the arclength: 1000 -> 1100 rpm at H = 32 in 175 points (before: 1000 points reached
+    1020.5 rpm; at H = 8 neither crawls), and the points are the solutions of ``solve_periodic``
+    at their speeds (only the metric changed). The linear LTV-A model keeps the plain metric."""
+    from hbgear.gear.response import frequency_response
+
+    model = build_model(load_config(EXAMPLE, ["friction.formulation='B'"]))
+    system = GearSystem(model)
+    assert not model.is_linear and system.arclength_mean_scales(1.0) is not None
+    assert GearSystem(build_model(load_config(EXAMPLE))).arclength_mean_scales(1.0) is None
+    curve = frequency_response(model, rpm_to_rad_s(1000.0), rpm_to_rad_s(1100.0), harmonics=32, samples=1024,
+                               max_points=400, stability=False, progress=False)
+    assert curve.success, curve.response.message
+    assert curve.points < 250, curve.points
+    response = curve.response
+    for i in (len(response) // 3, len(response) - 2):
+        reference = solve_periodic(model, float(response.parameter[i]), harmonics=32, samples=1024, tolerance=1e-12)
+        assert np.max(np.abs(response.z[i] - reference.z)) <= 1e-7 * np.max(np.abs(reference.z))
