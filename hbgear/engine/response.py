@@ -286,6 +286,9 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     rj, r, fixed = residual_functions(hb, system)
     method = sweep_method(p0, p1, step)
     sizes = arclength_sizes(hb, system, p0)
+    structured = getattr(rj, "jacobian_is_structured", None)
+    if sizes is not None and structured is not None and structured(*fixed):
+        sizes = None  # a port-structured Jacobian (hbgear.engine.condensed) is not rescaled: plain metric
     if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
         rj, r = _sized_functions_of(hb)
         fixed = (*fixed, sizes)
