@@ -30,8 +30,9 @@ loss is born between two samples: the force removed over a pulse of width ``w`` 
 and with the jumps alone the ramp, unseen by the samples, left an error ``O(sqrt(depth)/N)``:
 a residual with an infinite derivative at the birth. (A jump that stays finite as the pulse is
 born -- a load switched off at a finite value -- gives the exact residual itself such a
-derivative; no correction removes that.) At most :data:`MAX_CROSSINGS` sign changes (the first in time) and
-:data:`MAX_EXCURSIONS` excursions per function and base period are corrected; more stay
+derivative; no correction removes that.) At most the system's ``event_zero_capacity`` (default
+:data:`MAX_CROSSINGS`, :data:`MAX_EXCURSIONS`) sign changes (the first in time) and excursions per
+function and base period are corrected; more stay
 ``O(1/N)``, and the residual then jumps where the set of corrected zeros changes (a Newton
 corrector cannot converge across such a jump).
 """
@@ -49,13 +50,12 @@ from . import fourier
 __all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "declared", "crossings", "crossings_compiled",
            "jump_correction", "jump_jacobian", "state_at"]
 
-#: Sign changes located per event function and base period. A relieved tooth pair near grazing
-#: contact (tip relief sized for the load) makes its event function wiggle about zero: 12 sign
-#: changes per mesh period were measured on ``examples/iso_tip_relief.toml`` at 1113 rpm (H = 24),
-#: where 8 left two jumps uncorrected and the residual jumped by 1e-6 as a third pair appeared.
-MAX_CROSSINGS = 32
-#: Excursions between two samples (two zeros each) located per event function and base period.
-MAX_EXCURSIONS = 4
+#: Sign changes located per event function and base period, by default (a system's
+#: ``event_zero_capacity`` may raise it: each located zero costs its share of every evaluation; with
+#: 32 and 4 a continuation point of the backlash pair with friction cost 3.6 times as much).
+MAX_CROSSINGS = 8
+#: Excursions between two samples (two zeros each) located per event function and base period, by default.
+MAX_EXCURSIONS = 2
 #: Half-width of the base-period interval across which a jump is measured.
 SIDE = 1e-10
 _NEWTON_STEPS = 6
@@ -116,7 +116,8 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     **Arguments:** `xc`, `vc`: real coefficients of ``q`` and ``q'``, shape ``(ndof, 2H+1)``;
     `nu`: mesh periods per base period; `samples`: the AFT samples ``N`` that bracket the zeros.
 
-    **Returns:** ``(t, valid)``, shapes ``(E, K)`` (``K = MAX_CROSSINGS + 2 MAX_EXCURSIONS``):
+    **Returns:** ``(t, valid)``, shapes ``(E, K)`` (``K = crossings + 2 excursions`` of the
+    system's ``event_zero_capacity``):
     base fractions in [0, 1] of the zeros of each function and which entries are zeros (the rest
     padding); ``None`` when the system declares no event functions.
     """
@@ -136,7 +137,8 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
         return jnp.where(index >= 0, index, 0), index >= 0
 
     # sign changes between samples i and i+1
-    i, valid = first(positive != (after > 0), MAX_CROSSINGS)
+    max_crossings, max_excursions = getattr(system, "event_zero_capacity", (MAX_CROSSINGS, MAX_EXCURSIONS))
+    i, valid = first(positive != (after > 0), max_crossings)
     e0, e1 = jnp.take_along_axis(e, i, axis=1), jnp.take_along_axis(after, i, axis=1)
     lo, hi = i / samples, (i + 1) / samples
     step = jnp.where(e0 != e1, e0 - e1, 1.0)
@@ -151,7 +153,7 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     curvature = 0.5 * (after + before) - e
     vertex = e - (0.5 * (after - before)) ** 2 / (4.0 * jnp.where(curvature != 0, curvature, 1.0))
     reach = jnp.where(extremum, jnp.where(positive, vertex, -vertex) / (jnp.abs(e) + jnp.abs(curvature)), jnp.inf)
-    _, j = jax.lax.top_k(-reach, MAX_EXCURSIONS)
+    _, j = jax.lax.top_k(-reach, max_excursions)
     candidate = jnp.take_along_axis(extremum, j, axis=1)
     j = jnp.where(candidate, j, 0)
     ext_lo, ext_hi = (j - 1) / samples, (j + 1) / samples

@@ -61,6 +61,11 @@ shapes returned, ``is_linear`` at a probe state):
   shape ``(E,) + s.shape``, across whose zeros ``Q_nl`` may jump (contact loss: a force that
   exists only while two surfaces touch). The engine locates their zeros along the solution and
   corrects those jumps exactly (:mod:`hbgear.engine.events`); kinks need no declaration.
+- ``event_zero_capacity = (8, 2)`` -- per event function and base period, the sign changes and
+  the excursions between two samples (born or dying contact losses) that are located and
+  corrected; more stay ``O(1/N)`` and the residual jumps where the set changes. Each costs its
+  share of every residual and Jacobian evaluation: raise it only for systems whose event
+  functions wiggle about zero (a relieved tooth pair near grazing contact).
 - ``free_mean_dof = None`` -- a coordinate with no restoring force whose mean is pinned to 0 and
   replaced by the unknown constant force ``extra`` (e.g. an output torque fixed by periodicity);
   its two trivial Floquet multipliers at 1 are dropped.
@@ -121,6 +126,7 @@ class PeriodicSystem:
     """Base class of every system the engine solves; see the module docstring for the contract."""
 
     free_mean_dof: int | None = None
+    event_zero_capacity: tuple[int, int] = (8, 2)
     displacement_scale = 1.0
     force_scale = 1.0
     coefficients_independent_of_parameter: bool = False
