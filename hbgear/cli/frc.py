@@ -215,7 +215,7 @@ def run(config, args, out_dir) -> int:
 
 def _corner_hint(model) -> str:
     """Why a relieved per-pair model with formulation A may stop (README, Limitations), or ``""``."""
-    if not (getattr(model.mesh, "per_pair", False) and not model.mesh_is_linear and model.formulation == "A"
+    if not (model.pairs_may_open and model.formulation == "A"
             and model.normal_loads == "compressive" and model.friction.name != "none"):
         return ""
     return ("With formulation A a pair's friction load (its static load) switches off at a finite value where the "

@@ -119,6 +119,8 @@ from dataclasses import dataclass
 import numpy as np
 from jax.tree_util import register_dataclass
 
+from .events import MAX_CROSSINGS, MAX_EXCURSIONS
+
 __all__ = ["PeriodicSystem", "check_system", "Duffing"]
 
 
@@ -126,7 +128,7 @@ class PeriodicSystem:
     """Base class of every system the engine solves; see the module docstring for the contract."""
 
     free_mean_dof: int | None = None
-    event_zero_capacity: tuple[int, int] = (8, 2)
+    event_zero_capacity: tuple[int, int] = (MAX_CROSSINGS, MAX_EXCURSIONS)
     displacement_scale = 1.0
     force_scale = 1.0
     coefficients_independent_of_parameter: bool = False

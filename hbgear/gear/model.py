@@ -550,6 +550,12 @@ class GearPairModel:
         return self.coupling == "LTI" or self.mesh.is_linear(self)
 
     @property
+    def pairs_may_open(self) -> bool:
+        """Per-pair contact (MODEL.md section 9) whose pairs can lose contact (relief or backlash):
+        its contact events need more located zeros and its formulation A a corner where a loss is born."""
+        return bool(getattr(self.mesh, "per_pair", False)) and not self.mesh_is_linear
+
+    @property
     def friction_has_linear_part(self) -> bool:
         """Friction loads with a nonzero affine part (:meth:`friction_loads`): LTI, LTV-A, LTV-B
         without backlash."""

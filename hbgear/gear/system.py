@@ -200,7 +200,7 @@ class GearSystem(PeriodicSystem):
         ``examples/iso_tip_relief.toml`` at 1113 rpm, H = 24, where 8 left two jumps uncorrected and
         the residual jumped by 1e-6 as a third pulse appeared); else the engine's default (8, 2): the
         backlash pair's two flank contacts, at a quarter of the cost per evaluation."""
-        if getattr(self.model.mesh, "per_pair", False) and not self.model.mesh_is_linear:
+        if self.model.pairs_may_open:
             return (32, 4)
         return (events.MAX_CROSSINGS, events.MAX_EXCURSIONS)
 
