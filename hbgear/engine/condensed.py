@@ -106,7 +106,7 @@ class PortFactor(NamedTuple):
     z: Any  # A^-1 [U, j]  (nB, mB + 1)
     row: Any  # the border row (nB + 1,)
     lu: Any  # LU of the capacitance S (mB + 2)
-    piv: Any
+    perm: Any  # its row permutation (S[perm] = L U)
 
     def solve(self, b):
         """``[[J, j], [row]]^{-1} b`` (`b` of length ``n B + 1``)."""
@@ -114,7 +114,7 @@ class PortFactor(NamedTuple):
         y = jac.solve_mean(b[:-1])
         last = b[-1]
         t = jnp.concatenate([jac.restrict(y), jnp.stack([last, self.row[:-1] @ y + (self.row[-1] - 1.0) * last])])
-        s = jax.scipy.linalg.lu_solve((self.lu, self.piv), t)
+        s = _lu_solve(self.lu, self.perm, t)
         return jnp.concatenate([y - self.z @ s[:-1], (last - s[-1])[None]])
 
 
@@ -181,8 +181,28 @@ class PortJacobian(NamedTuple):
         unit = jnp.zeros((1, mb + 2)).at[0, mb + 1].set(1.0)
         bottom = jnp.concatenate([row[:-1] @ z, (row[-1] - 1.0)[None]])[None]
         capacitance = jnp.eye(mb + 2) + jnp.concatenate([top, unit, bottom], axis=0)
-        lu, piv = jax.scipy.linalg.lu_factor(capacitance)
-        return PortFactor(self, z, row, lu, piv)
+        lu, perm = _lu_factor(capacitance)
+        return PortFactor(self, z, row, lu, perm)
+
+
+def _lu_factor(a):
+    """``(lu, perm)``: LAPACK's LU of `a` and its row permutation, made once here so that a solve
+    is a gather and two triangular solves. (``jax.scipy.linalg.lu_solve`` turns the pivots into
+    the permutation at every call, a loop of one swap per row: at 262 rows it measured 0.14 ms of
+    a 0.17 ms solve, one BLAS thread.) The loop is unrolled by 8 (0.065 ms instead of 0.11)."""
+    lu, piv = jax.scipy.linalg.lu_factor(a)
+
+    def swap(i, perm):
+        j = piv[i]
+        return perm.at[i].set(perm[j]).at[j].set(perm[i])
+
+    return lu, jax.lax.fori_loop(0, piv.shape[0], swap, jnp.arange(piv.shape[0], dtype=piv.dtype), unroll=8)
+
+
+def _lu_solve(lu, perm, b):
+    """``a^{-1} b`` from :func:`_lu_factor`'s ``(lu, perm)``."""
+    x = jax.lax.linalg.triangular_solve(lu, b[perm][:, None], left_side=True, lower=True, unit_diagonal=True)
+    return jax.lax.linalg.triangular_solve(lu, x, left_side=True, lower=False)[:, 0]
 
 
 def as_matrix(jacobian):
