@@ -51,7 +51,7 @@ import numpy as np
 from . import fourier
 
 __all__ = ["CondensedOperator", "port_operator", "PortJacobian", "PortFactor", "check_input_map", "port_basis",
-           "as_matrix"]
+           "as_matrix", "harmonic_major", "coordinate_major"]
 
 
 class CondensedOperator(NamedTuple):
@@ -75,7 +75,8 @@ def port_operator(stiffness, damping, ports, harmonics: int, xp=jnp):
     """``(Kb, Cb, P_K, P_C)`` of :class:`CondensedOperator` from the complex coefficients
     ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)`` and the port basis ``C`` ``(m, n)``: the means, and the
     convolution matrices of ``(K(s) - Kb) C^T`` and ``(C(s) - Cb) C^T (I (x) D_1)`` (``D_1`` the
-    derivative at unit frequency), flattened ``(n B, m B)``."""
+    derivative at unit frequency), flattened ``(n B, m B)`` with their rows harmonic-major
+    (:func:`harmonic_major`)."""
     n, m, b = stiffness.shape[0], ports.shape[0], 2 * harmonics + 1
     right = xp.asarray(ports).T.astype(stiffness.dtype)
 
@@ -83,11 +84,27 @@ def port_operator(stiffness, damping, ports, harmonics: int, xp=jnp):
         c = xp.einsum("ijk,jl->ilk", coefficients, right)
         c = xp.concatenate([0.0 * c[..., :1], c[..., 1:]], axis=-1)  # the mean is A's
         blocks = fourier.convolution_matrix(c, harmonics, xp)  # (n, m, B, B)
-        return xp.transpose(blocks, (0, 2, 1, 3)).reshape(n * b, m * b)
+        return harmonic_major(blocks, xp)
 
     # times (I_m (x) D_1) from the right: D_1 acts on each port's block of columns
     damping_ports = _times_d1(flat_ports(damping).reshape(n * b, m, b), harmonics, xp).reshape(n * b, m * b)
     return xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), flat_ports(stiffness), damping_ports
+
+
+def harmonic_major(blocks, xp=jnp):
+    """Blocks ``(n, m, B, B)`` (row coordinate, port, row coefficient, column coefficient) as the
+    matrix ``(n B, m B)`` with its rows *harmonic-major*: row ``b n + i`` is coordinate ``i``'s
+    coefficient ``b`` (the mean block's ``n`` rows, then ``a_k`` and ``b_k`` of every coordinate
+    for each ``k``: the rows of ``A``'s diagonal blocks, consecutive)."""
+    n, m, b = blocks.shape[0], blocks.shape[1], blocks.shape[2]
+    return xp.transpose(blocks, (2, 0, 1, 3)).reshape(n * b, m * b)
+
+
+def coordinate_major(x, ndof: int):
+    """Rows harmonic-major (:func:`harmonic_major`) -> coordinate-major (the unknowns' order)."""
+    b = x.shape[0] // ndof
+    rest = x.shape[1:]
+    return jnp.swapaxes(x.reshape((b, ndof) + rest), 0, 1).reshape(x.shape)
 
 
 def _times_d1(a, harmonics: int, xp):
@@ -103,7 +120,8 @@ class PortFactor(NamedTuple):
     """The factorisation of ``[[J, j], [row]]`` (:meth:`PortJacobian.bordered_factor`)."""
 
     jacobian: Any  # the PortJacobian (its inverted blocks)
-    z: Any  # A^-1 [U, j]  (nB, mB + 1)
+    z: Any  # A^-1 U (nB, mB), rows harmonic-major
+    z_column: Any  # A^-1 j (nB,)
     row: Any  # the border row (nB + 1,)
     lu: Any  # LU of the capacitance S (mB + 2)
     perm: Any  # its row permutation (S[perm] = L U)
@@ -111,11 +129,13 @@ class PortFactor(NamedTuple):
     def solve(self, b):
         """``[[J, j], [row]]^{-1} b`` (`b` of length ``n B + 1``)."""
         jac = self.jacobian
+        mb = self.z.shape[1]
         y = jac.solve_mean(b[:-1])
         last = b[-1]
         t = jnp.concatenate([jac.restrict(y), jnp.stack([last, self.row[:-1] @ y + (self.row[-1] - 1.0) * last])])
         s = _lu_solve(self.lu, self.perm, t)
-        return jnp.concatenate([y - self.z @ s[:-1], (last - s[-1])[None]])
+        zs = coordinate_major(self.z @ s[:mb], jac.mean.shape[0]) + self.z_column * s[mb]
+        return jnp.concatenate([y - zs, (last - s[-1])[None]])
 
 
 class PortJacobian(NamedTuple):
@@ -123,7 +143,8 @@ class PortJacobian(NamedTuple):
 
     **Fields:** `mean` ``(n, n)`` and `blocks` ``(H, 2n, 2n)``: ``A`` at ``k = 0`` (the free mean
     column replaced by the unit column) and on ``(a_k, b_k)`` of all coordinates, ``k >= 1``;
-    `inverse_mean`, `inverse_blocks`: their inverses; `ports` ``U`` ``(n B, m B)``; `input_map`
+    `inverse_mean`, `inverse_blocks`: their inverses; `ports` ``U`` ``(n B, m B)``, its rows
+    harmonic-major (:func:`harmonic_major`: ``A``'s blocks apply to it without transposes); `input_map`
     ``(m, n)``; `keep` ``(n B,)``: 1, 0 at the free mean slot (the column ``V^T`` drops).
     """
 
@@ -163,9 +184,28 @@ class PortJacobian(NamedTuple):
         kept = (x * self.keep.reshape((-1,) + (1,) * len(rest))).reshape((n, b) + rest)
         return jnp.einsum("mi,ib...->mb...", self.input_map, kept).reshape((-1,) + rest)
 
+    def _solve_rows(self, x):
+        """``A^{-1} x`` for `x` ``(n B, k)`` with its rows harmonic-major: the mean block on the
+        first ``n`` rows, the ``(2n, 2n)`` blocks on the next ``2n`` each, no transposes."""
+        n, h, _ = self._dims
+        mean = self.inverse_mean @ x[:n]
+        rest = jnp.einsum("hij,hjk->hik", self.inverse_blocks, x[n:].reshape(h, 2 * n, -1))
+        return jnp.concatenate([mean, rest.reshape(2 * n * h, -1)], axis=0)
+
+    def _restrict_rows(self, x):
+        """:meth:`restrict` of `x` ``(n B, k)`` with its rows harmonic-major: ``C diag(keep_b)``
+        on each coefficient's ``n`` rows, a batched product that reads `x` in place (the mask
+        of the free mean slot is folded into the small ``C``)."""
+        n, _, b = self._dims
+        m = self.input_map.shape[0]
+        c = self.input_map[None] * self.keep.reshape(n, b).T[:, None, :]  # (B, m, n)
+        out = jnp.matmul(c, x.reshape(b, n, -1))  # (B, m, k)
+        return jnp.swapaxes(out, 0, 1).reshape(m * b, -1)
+
     def matvec(self, x):
         """``J x``."""
-        return self._per_harmonic(self.mean, self.blocks, x) + self.ports @ self.restrict(x)
+        n = self.mean.shape[0]
+        return self._per_harmonic(self.mean, self.blocks, x) + coordinate_major(self.ports @ self.restrict(x), n)
 
     def dense(self):
         """``J`` as a matrix (the SVD fallback of a singular bordered system, the Python corrector)."""
@@ -174,15 +214,19 @@ class PortJacobian(NamedTuple):
 
     def bordered_factor(self, column, row) -> PortFactor:
         """The :class:`PortFactor` of ``[[J, column], [row]]``: ``Z = A^{-1} [U, column]`` and the
-        LU of the capacitance ``S`` (module docstring)."""
-        mb = self.ports.shape[1]
-        z = self.solve_mean(jnp.concatenate([self.ports, column[:, None]], axis=1))  # (nB, mB + 1)
-        top = jnp.concatenate([self.restrict(z), jnp.zeros((mb, 1))], axis=1)
+        LU of the capacitance ``S`` (module docstring); ``A^{-1} U`` on ``U``'s harmonic-major
+        rows (:meth:`_solve_rows`), ``A^{-1} column`` apart (no copy of ``U`` to append it)."""
+        n, _, b = self._dims
+        z = self._solve_rows(self.ports)  # (nB, mB), rows harmonic-major
+        z_column = self.solve_mean(column)
+        mb = z.shape[1]
+        top = jnp.concatenate([self._restrict_rows(z), self.restrict(z_column)[:, None], jnp.zeros((mb, 1))], axis=1)
         unit = jnp.zeros((1, mb + 2)).at[0, mb + 1].set(1.0)
-        bottom = jnp.concatenate([row[:-1] @ z, (row[-1] - 1.0)[None]])[None]
+        row_rows = row[:-1].reshape(n, b).T.reshape(-1)  # the border row's entries harmonic-major
+        bottom = jnp.concatenate([row_rows @ z, (row[:-1] @ z_column)[None], (row[-1] - 1.0)[None]])[None]
         capacitance = jnp.eye(mb + 2) + jnp.concatenate([top, unit, bottom], axis=0)
         lu, perm = _lu_factor(capacitance)
-        return PortFactor(self, z, row, lu, perm)
+        return PortFactor(self, z, z_column, row, lu, perm)
 
 
 def _lu_factor(a):

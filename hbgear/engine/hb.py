@@ -475,7 +475,8 @@ class HarmonicBalance:
             mass = system.mass_matrix(p, jnp)
             mean = k_bar @ xc + w * (c_bar @ v1) + w**2 * (mass @ fourier.differentiate(v1, self.harmonics, 1.0, jnp))
             y = (prepared.condensed.ports @ xc).reshape(-1)
-            return mean.reshape(self.size) + k_ports @ y + w * (c_ports @ y) - self._forcing(system, p, prepared)
+            ports = condensed.coordinate_major(k_ports @ y + w * (c_ports @ y), self.ndof)  # rows harmonic-major
+            return mean.reshape(self.size) + ports - self._forcing(system, p, prepared)
         frozen = prepared.frozen
         if frozen is None:
             lin, forcing, _ = self.linear_operator(system, p, prepared)
@@ -789,10 +790,8 @@ class HarmonicBalance:
             # path's preconditioner
             k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
 
-            def flat(b):
-                return jnp.transpose(b, (0, 2, 1, 3)).reshape(n * B, m * B)
-
-            u = u - flat(t_q) - self._times_derivative(flat(t_v), system, p, m)
+            # U's rows harmonic-major (condensed.harmonic_major), as P_K, P_C
+            u = u - condensed.harmonic_major(t_q + w * condensed._times_d1(t_v, H, jnp))
         u = u * scale
         mass = system.mass_matrix(p, jnp)
         kw = w * jnp.arange(1, H + 1)[:, None, None]
