@@ -20,6 +20,7 @@ from hbgear.engine.system import PeriodicSystem
 from hbgear.engine.condensed import as_matrix, check_input_map
 from hbgear.engine.continuation import continuation, sweep_method
 from hbgear.engine.hb import HarmonicBalance, residual_functions
+from hbgear.engine.response import _sized_functions_of, arclength_sizes
 from hbgear.engine.system import check_system
 from hbgear.gear.solve import rpm_to_rad_s
 from hbgear.gear.system import GearSystem
@@ -200,3 +201,38 @@ def test_a_system_that_is_not_a_gear_pair():
     dense, port = branches
     assert dense.success and port.success and len(dense.p) == len(port.p) > 10
     assert np.max(np.abs(dense.z - port.z)) <= 1e-10 * np.max(np.abs(dense.z))
+
+
+def test_the_arclength_scaling_is_the_dense_paths():
+    """The spring's mean wind-up counted in its own units (``arclength_mean_scales``, the NLTV pair
+    on the soft output spring) on the condensed path as on the dense one: the scaled
+    ``PortJacobian`` is ``R_z diag(sizes)`` to 1e-12, and the continuation in ``z / sizes``
+    (the ``frc`` sweep's unknowns) follows the dense path's curve to 1e-10 while both take the same
+    iterations (as in :func:`test_continuation_curves_are_the_dense_ones`)."""
+    system = gear(8, "NLTV")
+    p0, p1 = rpm_to_rad_s(4000.0), rpm_to_rad_s(4300.0)
+    runs = []
+    for hb, _, _, args in both(system):
+        sizes = arclength_sizes(hb, system, p0)
+        assert sizes is not None and np.max(sizes) > 1e3
+        srj, sr = _sized_functions_of(hb)
+        runs.append((hb, srj, sr, (*args, jnp.asarray(sizes))))
+    (hb, srj_d, _, args_d), (_, srj_c, _, args_c) = runs
+    assert args_c[1].condensed is not None
+    y = jnp.asarray(np.random.default_rng(0).standard_normal(hb.size)) / args_d[-1]
+    p = rpm_to_rad_s(5000.0)
+    r1, j1, _ = (np.asarray(a) for a in srj_d(y, p, *args_d))
+    r2, j2, _ = srj_c(y, p, *args_c)
+    assert hasattr(j2, "bordered_factor")  # the port form, scaled (not the dense matrix)
+    assert np.max(np.abs(np.asarray(as_matrix(j2)) - j1)) <= 1e-12 * np.max(np.abs(j1))
+    assert np.max(np.abs(np.asarray(r2) - r1)) <= 1e-12 * np.max(np.abs(r1))
+    branches = [continuation(srj, sr, np.zeros(hb.size), p0, p1, sweep_method(p0, p1, None), args=args,
+                             tolerance=1e-11, progress=False) for _, srj, sr, args in runs]
+    dense, port = branches
+    assert dense.success and port.success and len(port.p) > 20
+    n = min(len(dense.p), len(port.p))
+    flips = (dense.iterations[:n] != port.iterations[:n]) | ~np.isclose(dense.ds[:n], port.ds[:n], rtol=1e-9, atol=0)
+    same = int(np.argmax(flips)) if np.any(flips) else n
+    assert same > 20
+    assert np.max(np.abs(dense.p[:same] - port.p[:same])) <= 1e-10 * np.max(np.abs(dense.p))
+    assert np.max(np.abs(dense.z[:same] - port.z[:same])) <= 1e-10 * np.max(np.abs(dense.z))

@@ -202,6 +202,18 @@ class PortJacobian(NamedTuple):
         out = jnp.matmul(c, x.reshape(b, n, -1))  # (B, m, k)
         return jnp.swapaxes(out, 0, 1).reshape(m * b, -1)
 
+    def scaled(self, sizes) -> PortJacobian:
+        """``J diag(sizes)`` (`sizes` ``(n B,)``, positive): the columns of ``A``'s blocks and
+        their inverses' rows, and the mask of ``V^T`` (the continuation in the unknowns
+        ``z / sizes``: :func:`hbgear.engine.response.arclength_sizes`)."""
+        n, h, b = self._dims
+        sc = sizes.reshape(n, b)
+        s0 = sc[:, 0]
+        pairs = jnp.concatenate([sc[:, 1::2].T, sc[:, 2::2].T], axis=1)  # (H, 2n): a_k then b_k of each coordinate
+        return self._replace(mean=self.mean * s0[None, :], blocks=self.blocks * pairs[:, None, :],
+                             inverse_mean=self.inverse_mean / s0[:, None],
+                             inverse_blocks=self.inverse_blocks / pairs[:, :, None], keep=self.keep * sizes)
+
     def matvec(self, x):
         """``J x``."""
         n = self.mean.shape[0]

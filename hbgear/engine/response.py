@@ -286,9 +286,6 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     rj, r, fixed = residual_functions(hb, system)
     method = sweep_method(p0, p1, step)
     sizes = arclength_sizes(hb, system, p0)
-    structured = getattr(rj, "jacobian_is_structured", None)
-    if sizes is not None and structured is not None and structured(*fixed):
-        sizes = None  # a port-structured Jacobian (hbgear.engine.condensed) is not rescaled: plain metric
     if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
         rj, r = _sized_functions_of(hb)
         fixed = (*fixed, sizes)
@@ -331,12 +328,16 @@ def _sized_functions_of(hb: HarmonicBalance):
     """:func:`~hbgear.engine.hb.residual_functions` in the unknowns ``y = z / sizes`` (`sizes`
     the last extra argument): ``R(sizes y)`` and its Jacobian ``R_z diag(sizes)``."""
     def residual_and_jacobians(y, p, system, prepared, sizes):
+        if prepared.condensed is not None:  # a PortJacobian (hbgear.engine.condensed): its scaled form
+            res, jz, jp = hb.residual_and_port_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
+            return res, jz.scaled(jnp.asarray(sizes)), jp
         res, jz, jp = hb.residual_and_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
         return res, jz * sizes[None, :], jp
 
     def residual(y, p, system, prepared, sizes):
         return hb.residual(jnp.asarray(y) * sizes, p, system, prepared)
 
+    residual_and_jacobians.jacobian_is_structured = lambda system, prepared, sizes: prepared.condensed is not None
     return residual_and_jacobians, residual
 
 
