@@ -182,3 +182,56 @@ def test_gear_jacobian_with_contact_loss_equals_finite_differences(formulation, 
         e[j] = h
         fd[:, j] = (np.asarray(hb.residual(z + e, omega, system)) - np.asarray(hb.residual(z - e, omega, system))) / (2 * h)
     np.testing.assert_allclose(np.asarray(jz), fd, atol=1e-8 * np.abs(fd).max())
+
+
+@register_dataclass
+@dataclass(frozen=True)
+class LeavingSpring(_Gate):
+    r"""``x'' + c x' + k x = f cos(w t) - k_c max(x - d, 0) [s < s_b]``: a contact spring that
+    carries load while ``x > d`` and only before the phase ``s_b`` (a tooth pair that leaves the path
+    of contact there): a kink where ``x`` crosses ``d`` (an event), a jump at ``s_b`` (a breakpoint)."""
+
+    damping: float = 0.2
+    stiffness: float = 1.0
+    forcing: float = 1.0
+    push: float = 0.0
+    gap: float = 0.6
+    contact: float = 3.0
+    leaves: float = 0.43
+
+    def breakpoints(self, p, xp=np):
+        return xp.asarray([self.leaves])
+
+    def force(self, s, q, qd, p, part, extra, xp=np):
+        linear = self.forcing * xp.cos(2 * np.pi * s) - self.stiffness * q[0] - self.damping * qd[0]
+        spring = -self.contact * xp.maximum(q[0] - self.gap, 0.0) * xp.where(s < self.leaves, 1.0, 0.0)
+        return xp.stack([linear if part == "linear" else spring if part == "nonlinear" else linear + spring])
+
+    def event_functions(self, s, q, qd, p, xp=np):
+        return xp.stack([q[0] - self.gap])
+
+
+def test_residual_is_continuous_where_a_kink_moves_onto_a_breakpoint():
+    """``x = m + A cos(2 pi (t - t_0))`` falls through ``d`` near ``s_b``: as ``m`` moves that zero
+    across the breakpoint, the kink ``k_c x'`` of the force leaves the located zeros and sits at the
+    breakpoint, where the force also jumps. Its correction must follow it there: the residual is
+    continuous across the crossing (it stepped by the kink's ``O(1/N^2)`` correction, ~1e-4 here,
+    when only the kinks at the zeros were corrected)."""
+    harmonics, samples = 8, 64
+    hb = HarmonicBalance(1, harmonics, 1, samples)
+    system = LeavingSpring()
+    amplitude, t0 = 0.3, 0.2
+    # the falling zero of x - d at t_b = s_b when m = d - A cos(2 pi (s_b - t0))
+    m_b = system.gap - amplitude * math.cos(2 * math.pi * (system.leaves - t0))
+
+    def residual(m):
+        z = np.zeros(hb.size)
+        z[0] = m
+        z[1], z[2] = amplitude * math.cos(2 * math.pi * t0), amplitude * math.sin(2 * math.pi * t0)
+        return np.asarray(hb.residual(jnp.asarray(z), W, system))
+
+    # dt_c/dm = 1/|x'(t_b)| ~ 0.6: dm = 1e-7 moves the zero 6e-8 (far outside the 1e-10 the jumps are
+    # measured across) to either side of the breakpoint
+    steps = [np.max(np.abs(residual(m_b + dm) - residual(m_b - dm))) for dm in (1e-5, 1e-6, 1e-7)]
+    assert steps[2] < 1e-6, steps  # continuous: the step is the slope times 2 dm
+    assert steps[0] / steps[1] > 5 and steps[1] / steps[2] > 5, steps  # and shrinks with dm

@@ -30,7 +30,9 @@ loss is born between two samples: the force removed over a pulse of width ``w`` 
 and with the jumps alone the ramp, unseen by the samples, left an error ``O(sqrt(depth)/N)``:
 a residual with an infinite derivative at the birth. (A jump that stays finite as the pulse is
 born -- a load switched off at a finite value -- gives the exact residual itself such a
-derivative; no correction removes that.) At most the system's ``event_zero_capacity`` (default
+derivative; no correction removes that.) The kinks at the system's known breakpoints are
+corrected with them (:func:`_with_breakpoint_kinks`; their jumps are the discretisation's), so a
+kink that the state moves onto a breakpoint stays corrected there. At most the system's ``event_zero_capacity`` (default
 :data:`MAX_CROSSINGS`, :data:`MAX_EXCURSIONS`) sign changes (the first in time) and excursions per
 function and base period are corrected; more stay
 ``O(1/N)``, and the residual then jumps where the set of corrected zeros changes (a Newton
@@ -214,8 +216,12 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
 
     The zero is moved by one Newton step on the shifted state from its located value, which
     carries the implicit derivative ``dt_c = -de / e'``; the jumps are measured across it.
+    `located` ``(t, valid, weight)``: ``weight`` 0 marks a fixed breakpoint of
+    :func:`_with_breakpoint_kinks` (not moved, its kink only, times its weight).
     """
-    t0, valid = located
+    t0, valid, weight = located
+    event = weight == 0.0
+    weight = jnp.where(event, 1.0, weight)
     count = t0.shape[0]
 
     def own(t):
@@ -226,7 +232,7 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
         return values[rows, rows]
 
     value, slope = jax.jvp(own, (t0,), (jnp.ones_like(t0),))
-    t = (t0 - jnp.where(valid, value / jnp.where(slope != 0, slope, 1.0), 0.0)).ravel()
+    t = (t0 - jnp.where(valid & event, value / jnp.where(slope != 0, slope, 1.0), 0.0)).ravel()
     sides = jnp.concatenate([t + SIDE, t - SIDE])
     def both_sides(a):
         return 0.0 if a is None else jnp.tile(a.reshape(xc.shape[0], -1), 2)
@@ -242,8 +248,8 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
     force, rate = jax.jvp(force_at, (sides,), (jnp.ones_like(sides),))  # Q_nl and dQ_nl/dt
     size = t.shape[0]
     mask = valid.ravel()[None]
-    jump = jnp.where(mask, force[:, :size] - force[:, size:], 0.0)  # (ndof, C)
-    kink = jnp.where(mask, rate[:, :size] - rate[:, size:], 0.0)
+    jump = jnp.where(mask & event.ravel()[None], force[:, :size] - force[:, size:], 0.0)  # (ndof, C)
+    kink = jnp.where(mask, rate[:, :size] - rate[:, size:], 0.0) * weight.ravel()[None]
     k = jnp.arange(1, harmonics + 1)
     angle = 2 * np.pi * t[:, None] * k[None]
     sin, cos = jnp.sin(angle), jnp.cos(angle)
@@ -258,13 +264,40 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
             + kink.T[:, :, None] * (exact2 - parabola)[:, None])
 
 
+def _with_breakpoint_kinks(system, p, located, nu: int):
+    """The located zeros ``(t, valid)`` ``(E, K)`` joined by the system's known breakpoints (and
+    phase 0) as kinks to correct: ``(t, valid, weight)`` ``(E, K + nu B)``, the breakpoints in row 0
+    with ``weight = 1 / multiplicity`` (a phase listed twice counts once), every zero with 0.
+
+    The jumps of ``Q_nl`` at the breakpoints are corrected by the discretisation
+    (:meth:`hbgear.engine.hb.HarmonicBalance._sample_points`); their kinks are corrected here, for
+    systems with event functions, so that a kink which moves with the state onto a breakpoint
+    (a pair that opens just as it leaves the path of contact) stays corrected when it gets there:
+    with the kinks at the zeros corrected and those at the breakpoints not, the residual stepped
+    by the kink's ``O(1/N^2)`` correction where a zero crossed a breakpoint, and a Newton
+    corrector stalled there.
+    """
+    t, valid = located
+    phase = jnp.mod(jnp.concatenate([jnp.zeros(1), jnp.ravel(jnp.asarray(system.breakpoints(p, jnp)))]), 1.0)
+    gap = jnp.abs(phase[:, None] - phase[None, :])
+    weight = 1.0 / jnp.sum(jnp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
+    t_b = ((phase[None, :] + jnp.arange(nu)[:, None]) / nu).ravel()
+    w_b = jnp.tile(weight, nu)
+    rows = t.shape[0]
+    first = jnp.arange(rows)[:, None] == 0
+    t_all = jnp.concatenate([t, jnp.broadcast_to(t_b, (rows, t_b.shape[0]))], axis=1)
+    valid_all = jnp.concatenate([valid, jnp.broadcast_to(first, (rows, t_b.shape[0]))], axis=1)
+    weight_all = jnp.concatenate([jnp.zeros(t.shape), jnp.broadcast_to(w_b, (rows, t_b.shape[0]))], axis=1)
+    return jax.lax.stop_gradient(t_all), valid_all, jax.lax.stop_gradient(weight_all)
+
+
 def jump_correction(system, p, extra, xc, vc, harmonics: int, nu: int, samples: int):
     """``sum_c J_c (B_hat_c - P B_c)``: real coefficients ``(ndof, 2H+1)`` to add to the projection
     of ``Q_nl`` for its jumps at the zeros of the event functions (zero without any)."""
     located = crossings(system, p, xc, vc, nu, samples)
     if located is None:
         return jnp.zeros(xc.shape)
-    located = jax.lax.stop_gradient(located)
+    located = _with_breakpoint_kinks(system, p, jax.lax.stop_gradient(located), nu)
     shift = jnp.zeros((xc.shape[0],) + located[0].shape)
     return jnp.sum(_contributions(system, p, extra, xc, vc, located, shift, shift, harmonics, nu, samples), axis=0)
 
@@ -283,7 +316,7 @@ def jump_jacobian(system, p, extra, xc, vc, harmonics: int, nu: int, samples: in
     located = crossings(system, p, xc, vc, nu, samples)
     if located is None:
         return None
-    located = jax.lax.stop_gradient(located)
+    located = _with_breakpoint_kinks(system, p, jax.lax.stop_gradient(located), nu)
     n = xc.shape[0]
     zero = jnp.zeros((n,) + located[0].shape)
     t_c = located[0].ravel()
