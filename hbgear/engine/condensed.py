@@ -87,7 +87,7 @@ def port_operator(stiffness, damping, ports, harmonics: int, xp=jnp):
         return harmonic_major(blocks, xp)
 
     # times (I_m (x) D_1) from the right: D_1 acts on each port's block of columns
-    damping_ports = _times_d1(flat_ports(damping).reshape(n * b, m, b), harmonics, xp).reshape(n * b, m * b)
+    damping_ports = times_d1(flat_ports(damping).reshape(n * b, m, b), harmonics, xp).reshape(n * b, m * b)
     return xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), flat_ports(stiffness), damping_ports
 
 
@@ -107,7 +107,7 @@ def coordinate_major(x, ndof: int):
     return jnp.swapaxes(x.reshape((b, ndof) + rest), 0, 1).reshape(x.shape)
 
 
-def _times_d1(a, harmonics: int, xp):
+def times_d1(a, harmonics: int, xp):
     """``a @ D_1`` along the last axis (``D_1`` :func:`~hbgear.engine.fourier.derivative_matrix` at
     unit frequency): column ``a_k`` becomes ``-k`` times column ``b_k``, column ``b_k`` ``k``
     times column ``a_k``, column ``a_0`` zero."""

@@ -32,9 +32,9 @@ a residual with an infinite derivative at the birth. (A jump that stays finite a
 born -- a load switched off at a finite value -- gives the exact residual itself such a
 derivative; no correction removes that.) The kinks at the system's known breakpoints are
 corrected with them (:func:`_with_breakpoint_kinks`; their jumps are the discretisation's), so a
-kink that the state moves onto a breakpoint stays corrected there. At most the system's ``event_zero_capacity`` (default
-:data:`MAX_CROSSINGS`, :data:`MAX_EXCURSIONS`) sign changes (the first in time) and excursions per
-function and base period are corrected; more stay
+kink that the state moves onto a breakpoint stays corrected there. At most the system's
+``event_zero_capacity`` (default :data:`MAX_CROSSINGS`, :data:`MAX_EXCURSIONS`) sign changes (the
+first in time) and excursions per function and base period are corrected; more stay
 ``O(1/N)``, and the residual then jumps where the set of corrected zeros changes (a Newton
 corrector cannot converge across such a jump).
 """
@@ -49,7 +49,7 @@ import numpy as np
 
 from . import fourier
 
-__all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "declared", "crossings", "crossings_compiled",
+__all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "breakpoint_instants", "declared", "crossings", "crossings_compiled",
            "jump_correction", "jump_jacobian", "state_at"]
 
 #: Sign changes located per event function and base period, by default (a system's
@@ -264,6 +264,17 @@ def _contributions(system, p, extra, xc, vc, located, shift_q, shift_v, harmonic
             + kink.T[:, :, None] * (exact2 - parabola)[:, None])
 
 
+def breakpoint_instants(breakpoints, nu: int, xp=np):
+    """Phase 0 and the mesh-phase `breakpoints`, once in each of the ``nu`` mesh periods of the
+    base period: ``(s_c, t_c, weight)``, each ``(nu (B + 1),)`` -- mesh phases, base fractions
+    ``t_c = (s_c + j) / nu`` and ``1 / multiplicity`` (a phase listed twice counts once)."""
+    phase = xp.mod(xp.concatenate([xp.zeros(1), breakpoints]), 1.0)
+    gap = xp.abs(phase[:, None] - phase[None, :])
+    weight = 1.0 / xp.sum(xp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
+    t_c = ((phase[None, :] + xp.arange(nu)[:, None]) / nu).ravel()
+    return xp.tile(phase, nu), t_c, xp.tile(weight, nu)
+
+
 def _with_breakpoint_kinks(system, p, located, nu: int):
     """The located zeros ``(t, valid)`` ``(E, K)`` joined by the system's known breakpoints (and
     phase 0) as kinks to correct: ``(t, valid, weight)`` ``(E, K + nu B)``, the breakpoints in row 0
@@ -278,11 +289,7 @@ def _with_breakpoint_kinks(system, p, located, nu: int):
     corrector stalled there.
     """
     t, valid = located
-    phase = jnp.mod(jnp.concatenate([jnp.zeros(1), jnp.ravel(jnp.asarray(system.breakpoints(p, jnp)))]), 1.0)
-    gap = jnp.abs(phase[:, None] - phase[None, :])
-    weight = 1.0 / jnp.sum(jnp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
-    t_b = ((phase[None, :] + jnp.arange(nu)[:, None]) / nu).ravel()
-    w_b = jnp.tile(weight, nu)
+    _, t_b, w_b = breakpoint_instants(jnp.ravel(jnp.asarray(system.breakpoints(p, jnp))), nu, jnp)
     rows = t.shape[0]
     first = jnp.arange(rows)[:, None] == 0
     t_all = jnp.concatenate([t, jnp.broadcast_to(t_b, (rows, t_b.shape[0]))], axis=1)

@@ -582,11 +582,7 @@ class HarmonicBalance:
 
     def _jump_layout_of(self, breakpoints, xp):
         H, N, nu = self.harmonics, self.samples, self.nu
-        phase = xp.mod(xp.concatenate([xp.zeros(1), breakpoints]), 1.0)
-        gap = xp.abs(phase[:, None] - phase[None, :])
-        weight = 1.0 / xp.sum(xp.minimum(gap, 1.0 - gap) < 1e-12, axis=1)
-        s_c = xp.tile(phase, nu)  # mesh phases; base phases t_c = (s_c + j) / nu, j = 0 .. nu-1
-        t_c = ((phase[None, :] + xp.arange(nu)[:, None]) / nu).ravel()
+        s_c, t_c, weight = events.breakpoint_instants(breakpoints, nu, xp)  # mesh phases, base fractions
         k = xp.arange(1, H + 1)
         angle = 2 * np.pi * t_c[:, None] * k[None]  # (C, H)
 
@@ -599,7 +595,7 @@ class HarmonicBalance:
         sides = xp.concatenate([xp.mod(s_c + eps, 1.0), xp.mod(s_c - eps, 1.0)])
         exact = real_basis(-xp.sin(angle) / (np.pi * k), xp.cos(angle) / (np.pi * k), 0 * ones)
         sawtooth = 0.5 - xp.mod(xp.arange(N)[None] / N - t_c[:, None], 1.0)  # (C, N)
-        return sides, at_c, xp.tile(weight, nu), exact - fourier.project(sawtooth, H, xp)
+        return sides, at_c, weight, exact - fourier.project(sawtooth, H, xp)
 
     def _velocity(self, x, system, p):
         return fourier.differentiate(x.reshape(self.ndof, self.block), self.harmonics, self.base_frequency(system, p),
@@ -791,7 +787,7 @@ class HarmonicBalance:
             k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
 
             # U's rows harmonic-major (condensed.harmonic_major), as P_K, P_C
-            u = u - condensed.harmonic_major(t_q + w * condensed._times_d1(t_v, H, jnp))
+            u = u - condensed.harmonic_major(t_q + w * condensed.times_d1(t_v, H, jnp))
         u = u * scale
         mass = system.mass_matrix(p, jnp)
         kw = w * jnp.arange(1, H + 1)[:, None, None]
