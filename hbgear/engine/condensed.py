@@ -119,7 +119,7 @@ def times_d1(a, harmonics: int, xp):
 class PortFactor(NamedTuple):
     """The factorisation of ``[[J, j], [row]]`` (:meth:`PortJacobian.bordered_factor`)."""
 
-    jacobian: Any  # the PortJacobian (its inverted blocks)
+    jacobian: Any  # the PortJacobian's inverses, input map and mask (no A, no U: solve does not read them)
     z: Any  # A^-1 U (nB, mB), rows harmonic-major
     z_column: Any  # A^-1 j (nB,)
     row: Any  # the border row (nB + 1,)
@@ -134,7 +134,7 @@ class PortFactor(NamedTuple):
         last = b[-1]
         t = jnp.concatenate([jac.restrict(y), jnp.stack([last, self.row[:-1] @ y + (self.row[-1] - 1.0) * last])])
         s = _lu_solve(self.lu, self.perm, t)
-        zs = coordinate_major(self.z @ s[:mb], jac.mean.shape[0]) + self.z_column * s[mb]
+        zs = coordinate_major(self.z @ s[:mb], jac.inverse_mean.shape[0]) + self.z_column * s[mb]
         return jnp.concatenate([y - zs, (last - s[-1])[None]])
 
 
@@ -158,7 +158,7 @@ class PortJacobian(NamedTuple):
 
     @property
     def _dims(self):
-        n, h = self.mean.shape[0], self.blocks.shape[0]
+        n, h = self.inverse_mean.shape[0], self.inverse_blocks.shape[0]
         return n, h, 2 * h + 1
 
     def _per_harmonic(self, mean, blocks, x):
@@ -238,7 +238,9 @@ class PortJacobian(NamedTuple):
         bottom = jnp.concatenate([row_rows @ z, (row[:-1] @ z_column)[None], (row[-1] - 1.0)[None]])[None]
         capacitance = jnp.eye(mb + 2) + jnp.concatenate([top, unit, bottom], axis=0)
         lu, perm = _lu_factor(capacitance)
-        return PortFactor(self, z, z_column, row, lu, perm)
+        # only what solve reads: a factorisation carried through the continuation's loops is
+        # copied there (a third of its bytes were U, unused)
+        return PortFactor(self._replace(mean=None, blocks=None, ports=None), z, z_column, row, lu, perm)
 
 
 def _lu_factor(a):

@@ -20,10 +20,12 @@ The Jacobian ``R_z`` is a matrix, or an object with ``bordered_factor(column, ro
 then every LU of a bordered matrix below is that factorisation (:func:`_factor_bordered`,
 :func:`_solve_bordered`), the same algorithm on cheaper linear algebra.
 
-The loop states are NamedTuples (JAX pytrees). Their fields are declared in alphabetical order,
-the order in which JAX flattened the string-keyed dicts they replaced, so that the program is
-the same one, instruction for instruction (its optimized HLO equal up to names and metadata;
-declared in reading order, the loop tuples come out permuted in a program of the same size).
+The loop states are NamedTuples (JAX pytrees), their fields in alphabetical order. XLA copies a
+loop variable that a ``lax.cond`` branch passes through while the other makes a new one, so the
+large arrays are kept out of such branches: a corrector run is a loop of chord turns (no
+Jacobian in its state) and then a loop of Newton turns, each of which evaluates ``J`` at its
+candidate and stores it outside its branches; the tangent's LU is made in the one conditional
+that otherwise passes the previous LU through.
 """
 
 from __future__ import annotations
@@ -291,7 +293,7 @@ def _take(eq: _Equations, s: _Iterate, r_c, jac_c, norm_c) -> _Iterate:
         return jnp.where(ok, y + step, y), step, jnp.where(ok, RUNNING, _SINGULAR).astype(jnp.int32)
 
     cand, step, status = jax.lax.cond(status < 0, newton_step, lambda _: (y, s.step, status), None)
-    return s._replace(it=it.astype(jnp.int32), y=y, jac=jac_c, norm=norm_c, cand=cand, step=step,
+    return s._replace(it=it.astype(jnp.int32), y=y, norm=norm_c, cand=cand, step=step,
                       mode=jnp.ones_like(s.mode), status=status)  # ones: NEWTON
 
 
@@ -315,20 +317,27 @@ def _backtrack(eq: _Equations, s: _Iterate) -> _Iterate:
 
 def _newton_turn(eq: _Equations, s: _Iterate) -> _Iterate:
     """Evaluate ``(R, J)`` at the candidate; take it unless it is a full Newton step that does not
-    decrease ``max |R|`` (then backtrack)."""
+    decrease ``max |R|`` (then backtrack). ``s.jac`` becomes this ``J`` either way (only a taken
+    candidate's is read, for the tangent at a converged one): the branches do not return it, so
+    the loop writes a fresh ``J`` each turn instead of copying one through the branches."""
     r_c, jac_c = _evaluate(eq, s.cand)
     norm_c = jnp.max(jnp.abs(r_c))
     decreased = jnp.isfinite(norm_c) & (norm_c < (1 - SUFFICIENT_DECREASE) * s.norm)
-    return jax.lax.cond((s.mode != NEWTON) | decreased, lambda _: _take(eq, s, r_c, jac_c, norm_c),
-                        lambda _: _backtrack(eq, s), None)
+    small = s._replace(jac=None)
+    s = jax.lax.cond((s.mode != NEWTON) | decreased, lambda _: _take(eq, small, r_c, jac_c, norm_c),
+                     lambda _: _backtrack(eq, small), None)
+    return s._replace(jac=jac_c)
 
 
 # ------------------------------------------------------------------------------ one corrector run
-def _correct(eq: _Equations, previous, factor: _Factor):
-    """One corrector run from ``eq.y_pred``; chord steps first when `factor` is usable.
+def _correct(eq: _Equations, previous, factor: _Factor, keep: _Factor):
+    """One corrector run from ``eq.y_pred``; chord steps first when `factor` is usable, then
+    Newton turns (the chord mode never resumes after them), in two loops: the chord loop does not
+    carry a Jacobian.
 
     **Returns:** ``(y, max|R|, Newton iterations, chord iterations, status, tangent, factor)``,
-    the tangent oriented along `previous` and `factor` the LU at ``y`` when converged.
+    the tangent oriented along `previous` and `factor` the LU at ``y`` when converged, else `keep`
+    (one conditional makes the new LU or passes `keep` through: no copy of either).
     """
     size, i32 = eq.size, jnp.int32
     d = eq.row - factor.previous
@@ -340,18 +349,16 @@ def _correct(eq: _Equations, previous, factor: _Factor):
         jac0 = _zeros_like_tree(jax.eval_shape(lambda y: _evaluate(eq, y)[1], eq.y_pred))
     else:
         jac0 = jnp.zeros((size, size + 1))
-    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=jac0, norm=norm0,
+    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=None, norm=norm0,
                     cand=eq.y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, CHORD, PREDICTOR).astype(i32),
                     status=jnp.asarray(RUNNING, i32), chord_it=jnp.asarray(0, i32))
-    # (`it >= 0` always holds: see _running)
-    s = jax.lax.while_loop(lambda s: _running(s.status < 0, s.it),
-                           lambda s: jax.lax.cond(s.mode == CHORD, lambda s: _chord_turn(eq, chord, s),
-                                                  lambda s: _newton_turn(eq, s), s), init)
+    # (`it >= 0` always holds: see _running); a chord turn leaves `status` RUNNING
+    s = jax.lax.while_loop(lambda s: _running(s.mode == CHORD, s.it), lambda s: _chord_turn(eq, chord, s), init)
+    s = jax.lax.while_loop(lambda s: _running(s.status < 0, s.it), lambda s: _newton_turn(eq, s),
+                           s._replace(jac=jac0))
+
     def failed():
-        if not isinstance(s.jac, tuple):
-            return jnp.full(size + 1, jnp.nan), _no_factor(size, previous)
-        _, empty = _zeros_like_tree(jax.eval_shape(lambda: _tangent_and_factor(s.jac, previous)))
-        return jnp.full(size + 1, jnp.nan), empty._replace(previous=previous, usable=jnp.asarray(False))
+        return jnp.full(size + 1, jnp.nan), keep
 
     t, new_factor = jax.lax.cond(s.status == _CONVERGED, lambda: _tangent_and_factor(s.jac, previous), failed)
     return s.y, s.norm, s.it, s.chord_it, s.status, t, new_factor
@@ -380,10 +387,9 @@ def _segment_turn(problem, max_iter, tolerance, scale, use_chord, budget, contro
     `pending` and the segment ends."""
     c = controls
     eq = _Equations(*problem, scale, args, s.y_pred, s.row, s.target, max_iter, tolerance)
-    y, norm, newton_it, chord_it, status, t, new_factor = _correct(
-        eq, s.previous, s.factor._replace(usable=s.factor.usable & use_chord))
+    y, norm, newton_it, chord_it, status, t, factor = _correct(
+        eq, s.previous, s.factor._replace(usable=s.factor.usable & use_chord), s.factor)
     converged = status == _CONVERGED
-    factor = jax.lax.cond(converged, lambda: new_factor, lambda: s.factor)
     regular, angle = _is_regular(s, y, t, converged, c, budget)
     ds = s.ds
     work = newton_it + CHORD_ITERATION_WORK * chord_it
