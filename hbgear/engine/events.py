@@ -90,26 +90,36 @@ def _own_events(system, p, xc, vc, nu, t):
 
 
 def _newton(f, t, lo, hi):
-    """Newton steps for ``f(t) = 0`` (elementwise), clipped to ``[lo, hi]`` (the extremum search)."""
-    for _ in range(_NEWTON_STEPS):
+    """Newton steps for ``f(t) = 0`` (elementwise), clipped to ``[lo, hi]`` (the extremum search).
+
+    A ``fori_loop``, so ``f`` (the system's event functions) is traced and compiled once, not once
+    per step."""
+
+    def step(_, t):
         value, slope = jax.jvp(f, (t,), (jnp.ones_like(t),))
-        t = jnp.clip(t - value / jnp.where(slope != 0, slope, 1.0), lo, hi)
-    return t
+        return jnp.clip(t - value / jnp.where(slope != 0, slope, 1.0), lo, hi)
+
+    real = jnp.result_type(float)  # a strongly typed carry (the start may be an integer / weak type)
+    return jax.lax.fori_loop(0, _NEWTON_STEPS, step, jnp.asarray(t, real))
 
 
 def _bracketed_zero(f, t, lo, hi):
     """The zero of ``f`` in ``[lo, hi]`` (``f(lo)``, ``f(hi)`` of opposite signs), elementwise:
     Newton steps that fall outside the shrinking bracket are replaced by bisection, so a zero
-    just outside the bracket cannot capture the iteration."""
-    f_lo = f(lo)
-    for _ in range(_BRACKET_STEPS):
+    just outside the bracket cannot capture the iteration (a ``fori_loop``, as :func:`_newton`)."""
+
+    def bisect_or_step(_, state):
+        t, lo, hi, f_lo = state
         value, slope = jax.jvp(f, (t,), (jnp.ones_like(t),))
         low_side = (value > 0) == (f_lo > 0)
         lo, hi = jnp.where(low_side, t, lo), jnp.where(low_side, hi, t)
         f_lo = jnp.where(low_side, value, f_lo)
         step = t - value / jnp.where(slope != 0, slope, 1.0)
-        t = jnp.where((step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
-    return t
+        return jnp.where((step >= lo) & (step <= hi), step, 0.5 * (lo + hi)), lo, hi, f_lo
+
+    real = jnp.result_type(float)
+    start = tuple(jnp.asarray(x, real) for x in (t, lo, hi, f(lo)))
+    return jax.lax.fori_loop(0, _BRACKET_STEPS, bisect_or_step, start)[0]
 
 
 def crossings(system, p, xc, vc, nu: int, samples: int):
@@ -123,10 +133,13 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     base fractions in [0, 1] of the zeros of each function and which entries are zeros (the rest
     padding); ``None`` when the system declares no event functions.
     """
+    # the zeros enter the residual as constants (its callers stop their gradients): no tangents
+    # are carried through the search, whatever transformation the caller is under
+    xc, vc, p = jax.lax.stop_gradient(xc), jax.lax.stop_gradient(vc), jax.lax.stop_gradient(p)
     grid = jnp.arange(samples) / samples
     harmonics = (xc.shape[-1] - 1) // 2
-    q = fourier.synthesize(jax.lax.stop_gradient(xc), harmonics, samples, jnp)
-    qd = fourier.synthesize(jax.lax.stop_gradient(vc), harmonics, samples, jnp)
+    q = fourier.synthesize(xc, harmonics, samples, jnp)
+    qd = fourier.synthesize(vc, harmonics, samples, jnp)
     values = system.event_functions(jnp.mod(grid * nu, 1.0), q, qd, p, jnp)
     if values is None:
         return None

@@ -695,12 +695,16 @@ class HarmonicBalance:
             return system.force(s, qq, vv, p, "nonlinear", extra, jnp)
 
         eye = jnp.eye(n) if directions is None else directions
-        count = eye.shape[1]
-        dv = jnp.stack([jax.jvp(lambda a: f(q, a), (qd,), (jnp.broadcast_to(eye[:, j][:, None], qd.shape),))[1] for j in range(count)], axis=1)
-        derivatives = [dv]
+
+        def along_columns(g, at):
+            """``(n_row, k, samples)``: the derivatives of `g` at `at` along the columns of `eye`,
+            vmapped (the force traced and compiled once, not once per direction)."""
+            tangent = lambda d: jax.jvp(g, (at,), (jnp.broadcast_to(d[:, None], at.shape),))[1]  # noqa: E731
+            return jnp.moveaxis(jax.vmap(tangent)(eye.T), 0, 1)
+
+        derivatives = [along_columns(lambda a: f(q, a), qd)]
         if system.nonlinear_force_uses_displacement:
-            dq = jnp.stack([jax.jvp(lambda a: f(a, qd), (q,), (jnp.broadcast_to(eye[:, j][:, None], q.shape),))[1] for j in range(count)], axis=1)
-            derivatives.insert(0, dq)
+            derivatives.insert(0, along_columns(lambda a: f(a, qd), q))
         return jnp.stack(derivatives), layout
 
     def _times_derivative(self, a, system, p, blocks=None):
