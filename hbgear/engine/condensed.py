@@ -168,16 +168,15 @@ class PortJacobian(NamedTuple):
         return n, h, 2 * h + 1
 
     def _per_harmonic(self, mean, blocks, x):
-        """``blockdiag(mean, blocks) x`` for `x` ``(n B, ...)`` coordinate-major."""
+        """``blockdiag(mean, blocks) x`` for `x` ``(n B, ...)`` coordinate-major: harmonic-major, the
+        coefficients ``a_k``, ``b_k`` of all coordinates are consecutive rows, one block's input."""
         n, h, b = self._dims
         rest = x.shape[1:]
-        xc = x.reshape((n, b) + rest)
-        pairs = jnp.concatenate([jnp.swapaxes(xc[:, 1::2], 0, 1), jnp.swapaxes(xc[:, 2::2], 0, 1)], axis=1)
-        solved = jnp.einsum("hij,hj...->hi...", blocks, pairs)  # (H, 2n, ...)
-        a, bb = jnp.swapaxes(solved[:, :n], 0, 1), jnp.swapaxes(solved[:, n:], 0, 1)  # (n, H, ...)
-        out = jnp.stack([a, bb], axis=2).reshape((n, 2 * h) + rest)
-        first = jnp.einsum("ij,j...->i...", mean, xc[:, 0])[:, None]
-        return jnp.concatenate([first, out], axis=1).reshape(x.shape)
+        xh = jnp.swapaxes(x.reshape((n, b) + rest), 0, 1)  # (B, n, ...)
+        first = jnp.einsum("ij,j...->i...", mean, xh[0])
+        pairs = jnp.einsum("hij,hj...->hi...", blocks, xh[1:].reshape((h, 2 * n) + rest))
+        out = jnp.concatenate([first[None], pairs.reshape((2 * h, n) + rest)], axis=0)
+        return jnp.swapaxes(out, 0, 1).reshape(x.shape)
 
     def solve_mean(self, x):
         """``A^{-1} x``, `x` ``(n B,)`` or ``(n B, k)`` coordinate-major."""
