@@ -153,6 +153,27 @@ def test_a_wrong_input_map_is_refused():
         HarmonicBalance(8, H, 1, SAMPLES, operator="condensed").prepare(wrong)
 
 
+def test_a_wrong_output_map_is_refused():
+    """LTV friction of formulation B (loaded by the dynamic mesh force) sees only ``delta`` but acts
+    on the rotations and the centres: declaring the outputs as ``delta`` alone breaks the
+    promise, and the probe says so."""
+
+    @jax.tree_util.register_dataclass
+    @dataclasses.dataclass(frozen=True)
+    class OutputsDelta(GearSystem):
+        def output_map(self, p):
+            return np.eye(self.ndof)[:1]
+
+    honest = gear(8, "LTV", "friction.formulation=B")
+    check_input_map(honest, rpm_to_rad_s(5000.0))
+    assert honest.input_map(1.0).shape[0] == 1 and honest.output_map(1.0).shape[0] == 4
+    wrong = OutputsDelta(honest.model)
+    with pytest.raises(ValueError, match="output_map"):
+        check_system(wrong, rpm_to_rad_s(5000.0))
+    with pytest.raises(ValueError, match="output_map"):
+        HarmonicBalance(8, H, 1, SAMPLES, operator="condensed").prepare(wrong)
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Chain(PeriodicSystem):
@@ -186,16 +207,38 @@ class Chain(PeriodicSystem):
         return np.eye(4)[:1]
 
 
-def test_a_system_that_is_not_a_gear_pair():
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ChainOnTwo(Chain):
+    """:class:`Chain` whose cubic spring pulls on the second mass too: the non-LTI force sees
+    ``q[0]`` and acts on ``q[0]`` and ``q[1]`` (not by virtual work), declared or not."""
+
+    outputs: tuple | None = dataclasses.field(default=None, metadata=dict(static=True))
+
+    def force(self, s, q, qd, p, part, extra, xp=np):
+        out = super().force(s, q, qd, p, part, extra, xp)
+        if part == "linear":
+            return out
+        return out + xp.stack([0.0 * q[0], 0.1 * q[0] ** 3, 0.0 * q[0], 0.0 * q[0]])
+
+    def output_map(self, p):
+        return None if self.outputs is None else np.eye(4)[list(self.outputs)]
+
+
+@pytest.mark.parametrize("system, outputs", [(Chain(), 4), (ChainOnTwo(), 4), (ChainOnTwo(outputs=(0, 1)), 2)],
+                         ids=["outputs-undeclared", "not-reciprocal", "two-outputs"])
+def test_a_system_that_is_not_a_gear_pair(system, outputs):
     """The engine knows nothing of gears: a chain with one nonlinear, parametric port, continued
-    on the dense and on the condensed path (forced: it is small), gives the same curve."""
-    system = Chain()
+    on the dense and on the condensed path (forced: it is small), gives the same curve, with
+    the outputs declared (two of the four coordinates) or not (all four)."""
     check_system(system, 1.0)
     branches = []
     for operator in ("dense", "condensed"):
         hb = HarmonicBalance(4, 5, 1, 64, operator=operator)
         rj, r, args = residual_functions(hb, system)
         assert (args[1].condensed is not None) == (operator == "condensed")
+        if operator == "condensed":
+            assert args[1].condensed.outputs.shape == (outputs, 4)
         branches.append(continuation(rj, r, np.zeros(hb.size), 0.6, 1.4, sweep_method(0.6, 1.4, None), args=args,
                                      tolerance=1e-11, progress=False))
     dense, port = branches

@@ -11,30 +11,41 @@ for some constant ``K_0``, ``C_0`` (bearings, shafts, masses: the LTI structure)
 ``\tilde Q`` (the time-varying, nonlinear mesh). The engine checks the promise at a probe state
 (:func:`check_input_map`); it never needs ``K_0``, ``C_0`` themselves.
 
-Then the harmonic-balance Jacobian is, with ``B = 2H+1`` and ``x`` coordinate-major,
+Then the harmonic-balance Jacobian is, with ``B = 2H+1``,
 
-.. math::  J = A + U (C \otimes I_B),
+.. math::  J = A + (O \otimes I_B)\, \tilde U\, (C \otimes I_B),
 
 where ``A`` is the mean Jacobian, block-diagonal per harmonic (``Kb - (k w)^2 M`` on the
 diagonal, ``+-k w Cb`` off it, bars the time averages of the periodic stiffness and damping of
-``Q_lin`` minus those of the sampled derivatives of ``Q_nl``), and ``U = (J - A)(C^+ \otimes I_B)``
-(``n B x m B``, ``C^+`` a right inverse): the difference ``J - A`` vanishes on the directions
-``C q = 0`` because the time-varying and nonlinear terms do not see them and the means in ``A``
-see them no more. ``U`` costs ``m``
-pointwise directional derivatives of ``Q_nl`` and the convolution matrices of ``K(s) C^+``,
-``C(s) C^+`` -- no ``n B`` tangents and no ``(n B)^2`` product.
+``Q_lin`` minus those of the sampled derivatives of ``Q_nl``), ``C`` has orthonormal rows, and
+``O`` (``n x r``, orthonormal columns) spans the *outputs*: the coordinates on which the
+non-LTI part of the force acts. ``J - A`` vanishes on the directions ``C q = 0`` (the
+time-varying and nonlinear terms do not see them and the means in ``A`` see them no more) and
+its rows lie in ``range(O)``, so ``\tilde U = (O^T \otimes I)(J - A)(C^T \otimes I)``
+(``r B x m B``): ``m`` pointwise directional derivatives of ``Q_nl`` projected on ``O``, and the
+convolution matrices of ``O^T K(s) C^T``, ``O^T C(s) C^T`` -- no ``n B`` tangents and no
+``(n B)^2`` product. A force derived by virtual work acts on the coordinates it sees (its
+generalized force is ``C^T`` times something), so ``O = C^T`` (:func:`output_basis` checks it
+at the probe state); otherwise ``O = I``.
 
 A continuation step solves with the bordered matrix ``[[J, j], [row]]`` (``j = dR/dp``);
 it is ``diag(A, 1)`` plus a rank ``m B + 2`` term, so (Woodbury)
 
     [[J, j], [row]]^{-1} b = y - Z S^{-1} V_b^T y,   y = diag(A, 1)^{-1} b,
 
-with ``Z = diag(A, 1)^{-1} U_b`` and the capacitance ``S = I + V_b^T Z`` of size ``m B + 2``:
-``H + 1`` inversions of ``2n x 2n`` blocks and one LU of ``m B + 2`` instead of the LU of
-``n B + 1``. It is exact (to rounding) whenever ``A`` is invertible, whatever ``J`` is (the
-bordered matrix stays regular through folds, and so does ``S``). :class:`PortJacobian` is the
-Jacobian in this form, :class:`PortFactor` the factorisation; both are pytrees, traced by the
-compiled continuation corrector.
+with ``Z = diag(A, 1)^{-1} U_b`` (never formed) and the capacitance ``S = I + V_b^T Z`` of size
+``m B + 2``, whose main block ``I + W \tilde U`` takes ``W = (C \otimes I) A^{-1} (O \otimes I)``,
+block-diagonal per harmonic (``2m x 2r`` blocks): ``H + 1`` inversions of ``2n x 2n`` blocks, a
+product with ``W`` and one LU of ``m B + 2`` instead of the LU of ``n B + 1``. It is exact (to
+rounding) whenever ``A`` is invertible, whatever ``J`` is (the bordered matrix stays regular
+through folds, and so does ``S``). :class:`PortJacobian` is the Jacobian in this form,
+:class:`PortFactor` the factorisation; both are pytrees, traced by the compiled continuation
+corrector.
+
+Port-side vectors and the rows and columns of ``\tilde U`` are *harmonic-major*
+(:func:`port_matrix`): entry ``b m + j`` is port ``j``'s coefficient ``b`` -- the mean's ``m``
+entries, then ``a_1`` and ``b_1`` of every port, ... -- so that ``W``'s blocks and ``A``'s apply
+without transposes.
 
 The free mean slot of a ``free_mean_dof`` (its column of ``J`` the unit vector) is carried by
 ``A`` (the same column in its mean block) and by ``V^T`` (that column zeroed).
@@ -51,60 +62,55 @@ import numpy as np
 from . import fourier
 
 __all__ = ["CondensedOperator", "port_operator", "PortJacobian", "PortFactor", "check_input_map", "port_basis",
-           "as_matrix", "harmonic_major", "coordinate_major"]
+           "output_basis", "as_matrix", "port_matrix"]
 
 
 class CondensedOperator(NamedTuple):
     """The prepared pieces of the condensed path (a pytree of device arrays).
 
     **Fields:** `ports` ``(m, n)``: an orthonormal basis ``C`` of the rows of the declared input
-    map; when the system's coefficients do not depend on the parameter (else ``None``: built in
-    the trace, :func:`port_operator`) the linear operator ``L(w) = A(w) + (P_K + w P_C)(C (x) I)``:
-    `mean_stiffness`, `mean_damping` ``(n, n)`` (``Kb``, ``Cb``), `stiffness_ports` ``P_K`` and
-    `damping_ports` ``P_C`` ``(n B, m B)``.
+    map; `outputs` ``(r, n)``: ``O^T`` (:func:`output_basis`: ``C`` or the identity); when the
+    system's coefficients do not depend on the parameter (else ``None``: built in the trace,
+    :func:`port_operator`) the linear operator
+    ``L(w) = A(w) + (O (x) I)(P_K + w P_C)(C (x) I)``: `mean_stiffness`, `mean_damping`
+    ``(n, n)`` (``Kb``, ``Cb``), `stiffness_ports` ``P_K`` and `damping_ports` ``P_C``
+    ``(r B, m B)`` (:func:`port_matrix`).
     """
 
     ports: Any
+    outputs: Any
     mean_stiffness: Any = None
     mean_damping: Any = None
     stiffness_ports: Any = None
     damping_ports: Any = None
 
 
-def port_operator(stiffness, damping, ports, harmonics: int, xp=jnp):
+def port_operator(stiffness, damping, ports, outputs, harmonics: int, xp=jnp):
     """``(Kb, Cb, P_K, P_C)`` of :class:`CondensedOperator` from the complex coefficients
-    ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)`` and the port basis ``C`` ``(m, n)``: the means, and the
-    convolution matrices of ``(K(s) - Kb) C^T`` and ``(C(s) - Cb) C^T (I (x) D_1)`` (``D_1`` the
-    derivative at unit frequency), flattened ``(n B, m B)`` with their rows harmonic-major
-    (:func:`harmonic_major`)."""
-    n, m, b = stiffness.shape[0], ports.shape[0], 2 * harmonics + 1
+    ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)``, the port basis ``C`` ``(m, n)`` and the outputs
+    ``O^T`` ``(r, n)``: the means, and the convolution matrices of ``O^T (K(s) - Kb) C^T`` and
+    ``O^T (C(s) - Cb) C^T (I (x) D_1)`` (``D_1`` the derivative at unit frequency) as
+    :func:`port_matrix` ``(r B, m B)``."""
     right = xp.asarray(ports).T.astype(stiffness.dtype)
+    left = xp.asarray(outputs).astype(stiffness.dtype)
 
-    def flat_ports(coefficients):
-        c = xp.einsum("ijk,jl->ilk", coefficients, right)
+    def blocks(coefficients):
+        c = xp.einsum("ri,ijk,jl->rlk", left, coefficients, right)
         c = xp.concatenate([0.0 * c[..., :1], c[..., 1:]], axis=-1)  # the mean is A's
-        blocks = fourier.convolution_matrix(c, harmonics, xp)  # (n, m, B, B)
-        return harmonic_major(blocks, xp)
+        return fourier.convolution_matrix(c, harmonics, xp)  # (r, m, B, B)
 
-    # times (I_m (x) D_1) from the right: D_1 acts on each port's block of columns
-    damping_ports = times_d1(flat_ports(damping).reshape(n * b, m, b), harmonics, xp).reshape(n * b, m * b)
-    return xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), flat_ports(stiffness), damping_ports
-
-
-def harmonic_major(blocks, xp=jnp):
-    """Blocks ``(n, m, B, B)`` (row coordinate, port, row coefficient, column coefficient) as the
-    matrix ``(n B, m B)`` with its rows *harmonic-major*: row ``b n + i`` is coordinate ``i``'s
-    coefficient ``b`` (the mean block's ``n`` rows, then ``a_k`` and ``b_k`` of every coordinate
-    for each ``k``: the rows of ``A``'s diagonal blocks, consecutive)."""
-    n, m, b = blocks.shape[0], blocks.shape[1], blocks.shape[2]
-    return xp.transpose(blocks, (2, 0, 1, 3)).reshape(n * b, m * b)
+    # times (I_m (x) D_1) from the right: D_1 acts on each port's column coefficients
+    damping_ports = port_matrix(times_d1(blocks(damping), harmonics, xp), xp)
+    return (xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), port_matrix(blocks(stiffness), xp),
+            damping_ports)
 
 
-def coordinate_major(x, ndof: int):
-    """Rows harmonic-major (:func:`harmonic_major`) -> coordinate-major (the unknowns' order)."""
-    b = x.shape[0] // ndof
-    rest = x.shape[1:]
-    return jnp.swapaxes(x.reshape((b, ndof) + rest), 0, 1).reshape(x.shape)
+def port_matrix(blocks, xp=jnp):
+    """Blocks ``(r, m, B, B)`` (output, port, row coefficient, column coefficient) as the matrix
+    ``(r B, m B)``, harmonic-major on both sides: row ``b r + i`` is output ``i``'s coefficient
+    ``b``, column ``d m + j`` port ``j``'s coefficient ``d``."""
+    r, m, b = blocks.shape[0], blocks.shape[1], blocks.shape[2]
+    return xp.transpose(blocks, (2, 0, 3, 1)).reshape(b * r, b * m)
 
 
 def times_d1(a, harmonics: int, xp):
@@ -119,8 +125,7 @@ def times_d1(a, harmonics: int, xp):
 class PortFactor(NamedTuple):
     """The factorisation of ``[[J, j], [row]]`` (:meth:`PortJacobian.bordered_factor`)."""
 
-    jacobian: Any  # the PortJacobian's inverses, input map and mask (no A, no U: solve does not read them)
-    z: Any  # A^-1 U (nB, mB), rows harmonic-major
+    jacobian: Any  # the PortJacobian without A (its inverses, U~, the maps and the mask)
     z_column: Any  # A^-1 j (nB,)
     row: Any  # the border row (nB + 1,)
     lu: Any  # LU of the capacitance S (mB + 2)
@@ -129,23 +134,23 @@ class PortFactor(NamedTuple):
     def solve(self, b):
         """``[[J, j], [row]]^{-1} b`` (`b` of length ``n B + 1``)."""
         jac = self.jacobian
-        mb = self.z.shape[1]
+        mb = jac.ports.shape[1]
         y = jac.solve_mean(b[:-1])
         last = b[-1]
         t = jnp.concatenate([jac.restrict(y), jnp.stack([last, self.row[:-1] @ y + (self.row[-1] - 1.0) * last])])
         s = _lu_solve(self.lu, self.perm, t)
-        zs = coordinate_major(self.z @ s[:mb], jac.inverse_mean.shape[0]) + self.z_column * s[mb]
-        return jnp.concatenate([y - zs, (last - s[-1])[None]])
+        correction = jac.solve_mean(jac.expand(jac.ports @ s[:mb])) + self.z_column * s[mb]
+        return jnp.concatenate([y - correction, (last - s[-1])[None]])
 
 
 class PortJacobian(NamedTuple):
-    """``dR/dz = A + U V^T`` (scaled; module docstring), a pytree.
+    """``dR/dz = A + (O (x) I) U~ (C (x) I) diag(keep)`` (scaled; module docstring), a pytree.
 
     **Fields:** `mean` ``(n, n)`` and `blocks` ``(H, 2n, 2n)``: ``A`` at ``k = 0`` (the free mean
     column replaced by the unit column) and on ``(a_k, b_k)`` of all coordinates, ``k >= 1``;
-    `inverse_mean`, `inverse_blocks`: their inverses; `ports` ``U`` ``(n B, m B)``, its rows
-    harmonic-major (:func:`harmonic_major`: ``A``'s blocks apply to it without transposes); `input_map`
-    ``(m, n)``; `keep` ``(n B,)``: 1, 0 at the free mean slot (the column ``V^T`` drops).
+    `inverse_mean`, `inverse_blocks`: their inverses; `ports` ``U~`` ``(r B, m B)``
+    (:func:`port_matrix`); `input_map` ``C`` ``(m, n)``; `output_map` ``O^T`` ``(r, n)``;
+    `keep` ``(n B,)``: 1, 0 at the free mean slot (the column ``V^T`` drops).
     """
 
     mean: Any
@@ -154,6 +159,7 @@ class PortJacobian(NamedTuple):
     inverse_blocks: Any
     ports: Any
     input_map: Any
+    output_map: Any
     keep: Any
 
     @property
@@ -162,45 +168,34 @@ class PortJacobian(NamedTuple):
         return n, h, 2 * h + 1
 
     def _per_harmonic(self, mean, blocks, x):
-        """``blockdiag(mean, blocks) x`` for `x` ``(n B, ...)`` coordinate-major."""
+        """``blockdiag(mean, blocks) x`` for `x` ``(n B, ...)`` coordinate-major: harmonic-major, the
+        coefficients ``a_k``, ``b_k`` of all coordinates are consecutive rows, one block's input."""
         n, h, b = self._dims
         rest = x.shape[1:]
-        xc = x.reshape((n, b) + rest)
-        pairs = jnp.concatenate([jnp.swapaxes(xc[:, 1::2], 0, 1), jnp.swapaxes(xc[:, 2::2], 0, 1)], axis=1)
-        solved = jnp.einsum("hij,hj...->hi...", blocks, pairs)  # (H, 2n, ...)
-        a, bb = jnp.swapaxes(solved[:, :n], 0, 1), jnp.swapaxes(solved[:, n:], 0, 1)  # (n, H, ...)
-        out = jnp.stack([a, bb], axis=2).reshape((n, 2 * h) + rest)
-        first = jnp.einsum("ij,j...->i...", mean, xc[:, 0])[:, None]
-        return jnp.concatenate([first, out], axis=1).reshape(x.shape)
+        xh = jnp.swapaxes(x.reshape((n, b) + rest), 0, 1)  # (B, n, ...)
+        first = jnp.einsum("ij,j...->i...", mean, xh[0])
+        pairs = jnp.einsum("hij,hj...->hi...", blocks, xh[1:].reshape((h, 2 * n) + rest))
+        out = jnp.concatenate([first[None], pairs.reshape((2 * h, n) + rest)], axis=0)
+        return jnp.swapaxes(out, 0, 1).reshape(x.shape)
 
     def solve_mean(self, x):
-        """``A^{-1} x``, `x` ``(n B,)`` or ``(n B, k)``."""
+        """``A^{-1} x``, `x` ``(n B,)`` or ``(n B, k)`` coordinate-major."""
         return self._per_harmonic(self.inverse_mean, self.inverse_blocks, x)
 
     def restrict(self, x):
-        """``V^T x = (C (x) I_B)`` of `x` with the free mean slot zeroed, ``(m B, ...)``."""
+        """``V^T x = (C (x) I_B)`` of `x` (coordinate-major) with the free mean slot zeroed,
+        harmonic-major ``(m B, ...)``."""
         n, _, b = self._dims
         rest = x.shape[1:]
         kept = (x * self.keep.reshape((-1,) + (1,) * len(rest))).reshape((n, b) + rest)
-        return jnp.einsum("mi,ib...->mb...", self.input_map, kept).reshape((-1,) + rest)
+        return jnp.einsum("mi,ib...->bm...", self.input_map, kept).reshape((-1,) + rest)
 
-    def _solve_rows(self, x):
-        """``A^{-1} x`` for `x` ``(n B, k)`` with its rows harmonic-major: the mean block on the
-        first ``n`` rows, the ``(2n, 2n)`` blocks on the next ``2n`` each, no transposes."""
-        n, h, _ = self._dims
-        mean = self.inverse_mean @ x[:n]
-        rest = jnp.einsum("hij,hjk->hik", self.inverse_blocks, x[n:].reshape(h, 2 * n, -1))
-        return jnp.concatenate([mean, rest.reshape(2 * n * h, -1)], axis=0)
-
-    def _restrict_rows(self, x):
-        """:meth:`restrict` of `x` ``(n B, k)`` with its rows harmonic-major: ``C diag(keep_b)``
-        on each coefficient's ``n`` rows, a batched product that reads `x` in place (the mask
-        of the free mean slot is folded into the small ``C``)."""
+    def expand(self, v):
+        """``(O (x) I_B) v``: `v` ``(r B, ...)`` harmonic-major to ``(n B, ...)`` coordinate-major."""
         n, _, b = self._dims
-        m = self.input_map.shape[0]
-        c = self.input_map[None] * self.keep.reshape(n, b).T[:, None, :]  # (B, m, n)
-        out = jnp.matmul(c, x.reshape(b, n, -1))  # (B, m, k)
-        return jnp.swapaxes(out, 0, 1).reshape(m * b, -1)
+        rest = v.shape[1:]
+        vb = v.reshape((b, self.output_map.shape[0]) + rest)
+        return jnp.einsum("ri,br...->ib...", self.output_map, vb).reshape((n * b,) + rest)
 
     def scaled(self, sizes) -> PortJacobian:
         """``J diag(sizes)`` (`sizes` ``(n B,)``, positive): the columns of ``A``'s blocks and
@@ -216,31 +211,54 @@ class PortJacobian(NamedTuple):
 
     def matvec(self, x):
         """``J x``."""
-        n = self.mean.shape[0]
-        return self._per_harmonic(self.mean, self.blocks, x) + coordinate_major(self.ports @ self.restrict(x), n)
+        return self._per_harmonic(self.mean, self.blocks, x) + self.expand(self.ports @ self.restrict(x))
 
     def dense(self):
         """``J`` as a matrix (the SVD fallback of a singular bordered system, the Python corrector)."""
         n, _, b = self._dims
         return self.matvec(jnp.eye(n * b))
 
+    def _capacitance_blocks(self):
+        """``W = V^T A^{-1} (O (x) I)`` per coefficient: ``(m, r)`` for the mean and ``(H, 2m, 2r)``
+        on ``(a_k, b_k)``, the mask of the free mean slot folded into ``C``."""
+        n, h, b = self._dims
+        c, o = self.input_map, self.output_map.T  # (m, n), (n, r)
+        keep = self.keep.reshape(n, b)
+        w0 = (c * keep[:, 0][None]) @ self.inverse_mean @ o
+        x = jnp.concatenate([self.inverse_blocks[:, :, :n] @ o, self.inverse_blocks[:, :, n:] @ o], axis=2)  # (H, 2n, 2r)
+        top = jnp.einsum("mi,hi,hir->hmr", c, keep[:, 1::2].T, x[:, :n])
+        bottom = jnp.einsum("mi,hi,hir->hmr", c, keep[:, 2::2].T, x[:, n:])
+        return w0, jnp.concatenate([top, bottom], axis=1)
+
+    def _row_through(self, row):
+        """``row^T A^{-1} (O (x) I)`` (`row` ``(n B,)`` coordinate-major), harmonic-major ``(r B,)``."""
+        n, h, b = self._dims
+        o = self.output_map.T
+        rc = row.reshape(n, b)
+        first = (rc[:, 0] @ self.inverse_mean) @ o
+        pairs = jnp.concatenate([rc[:, 1::2].T, rc[:, 2::2].T], axis=1)  # (H, 2n)
+        through = jnp.einsum("hi,hij->hj", pairs, self.inverse_blocks)  # (H, 2n)
+        return jnp.concatenate([first, jnp.concatenate([through[:, :n] @ o, through[:, n:] @ o], axis=1).reshape(-1)])
+
     def bordered_factor(self, column, row) -> PortFactor:
-        """The :class:`PortFactor` of ``[[J, column], [row]]``: ``Z = A^{-1} [U, column]`` and the
-        LU of the capacitance ``S`` (module docstring); ``A^{-1} U`` on ``U``'s harmonic-major
-        rows (:meth:`_solve_rows`), ``A^{-1} column`` apart (no copy of ``U`` to append it)."""
-        n, _, b = self._dims
-        z = self._solve_rows(self.ports)  # (nB, mB), rows harmonic-major
+        """The :class:`PortFactor` of ``[[J, column], [row]]``: the LU of the capacitance ``S``
+        (module docstring), its main block ``I + W U~`` by ``W``'s small blocks, its border from
+        ``A^{-1} column`` and ``row^T A^{-1}``; no ``A^{-1} U`` (the solve applies ``A^{-1}``
+        after ``U~``)."""
+        n, h, _ = self._dims
+        r = self.output_map.shape[0]
+        u = self.ports
+        mb = u.shape[1]
+        w0, wk = self._capacitance_blocks()
+        main = jnp.concatenate([w0 @ u[:r], jnp.einsum("hij,hjk->hik", wk, u[r:].reshape(h, 2 * r, mb)).reshape(-1, mb)])
         z_column = self.solve_mean(column)
-        mb = z.shape[1]
-        top = jnp.concatenate([self._restrict_rows(z), self.restrict(z_column)[:, None], jnp.zeros((mb, 1))], axis=1)
+        top = jnp.concatenate([main, self.restrict(z_column)[:, None], jnp.zeros((mb, 1))], axis=1)
         unit = jnp.zeros((1, mb + 2)).at[0, mb + 1].set(1.0)
-        row_rows = row[:-1].reshape(n, b).T.reshape(-1)  # the border row's entries harmonic-major
-        bottom = jnp.concatenate([row_rows @ z, (row[:-1] @ z_column)[None], (row[-1] - 1.0)[None]])[None]
-        capacitance = jnp.eye(mb + 2) + jnp.concatenate([top, unit, bottom], axis=0)
+        bottom = jnp.concatenate([self._row_through(row[:-1]) @ u, (row[:-1] @ z_column)[None], (row[-1] - 1.0)[None]])
+        capacitance = jnp.eye(mb + 2) + jnp.concatenate([top, unit, bottom[None]], axis=0)
         lu, perm = _lu_factor(capacitance)
-        # only what solve reads: a factorisation carried through the continuation's loops is
-        # copied there (a third of its bytes were U, unused)
-        return PortFactor(self._replace(mean=None, blocks=None, ports=None), z, z_column, row, lu, perm)
+        # only what solve reads: a factorisation carried through the continuation's loops is copied there
+        return PortFactor(self._replace(mean=None, blocks=None), z_column, row, lu, perm)
 
 
 def _lu_factor(a):
@@ -268,12 +286,15 @@ def as_matrix(jacobian):
     return jacobian.dense() if hasattr(jacobian, "bordered_factor") else jacobian
 
 
-def port_basis(matrix, ndof: int):
-    """An orthonormal basis ``(m, ndof)`` of the rows of a declared input map (numpy), or ``None``
-    when it spans every coordinate (nothing to condense)."""
+def port_basis(matrix, ndof: int, what: str = "input_map"):
+    """``(basis, complement)``: an orthonormal basis ``(m, ndof)`` of the rows of a declared input
+    (or output) map and one of the rest (numpy), or ``None`` when there is no map or it spans
+    every coordinate (nothing to condense)."""
+    if matrix is None:
+        return None
     c = np.atleast_2d(np.asarray(matrix, dtype=float))
     if c.ndim != 2 or c.shape[1] != ndof or not np.all(np.isfinite(c)):
-        raise ValueError(f"input_map(p) has shape {c.shape}: (m, {ndof}) finite values")
+        raise ValueError(f"{what}(p) has shape {c.shape}: (m, {ndof}) finite values")
     _, sv, vt = np.linalg.svd(c, full_matrices=True)
     rank = int(np.sum(sv > 1e-12 * max(float(sv.max(initial=0.0)), 1e-300)))
     if rank >= ndof:
@@ -281,10 +302,50 @@ def port_basis(matrix, ndof: int):
     return vt[:rank], vt[rank:]
 
 
+def output_basis(system, p) -> np.ndarray:
+    """``O^T`` ``(r, n)`` of the module docstring (numpy): an orthonormal basis of the rows of the
+    declared ``output_map``, or the identity when there is none or it spans every coordinate."""
+    basis = port_basis(system.output_map(p), system.ndof, "output_map")
+    return np.eye(system.ndof) if basis is None else basis[0]
+
+
+def _probe_changes(system, p, seed, directions, outside):
+    """Central changes of ``outside(Q)`` for a random move ``(dq, dq')`` in the span of the rows
+    of `directions`, at three phases and two random states (numpy), and the states' event
+    functions before and after the move (``None`` without events)."""
+    n = system.ndof
+    rng = np.random.default_rng(seed)
+    s = np.array([0.0731, 0.3517, 0.8123])
+    xs = float(system.displacement_scale)
+    vs = xs * float(system.excitation_frequency(p))
+    dq = directions.T @ rng.standard_normal(directions.shape[0]) * xs
+    dv = directions.T @ rng.standard_normal(directions.shape[0]) * vs
+
+    def force(q, v):
+        return outside(np.asarray(system.force(s, q, v, p, "all", 0.0, np), dtype=float))
+
+    changes, events = [], []
+    for _ in range(2):
+        q = rng.standard_normal((n, s.size)) * 0.5 * xs
+        v = rng.standard_normal((n, s.size)) * 0.5 * vs
+        base = force(q, v)
+        changes.append(force(q + dq[:, None], v + dv[:, None]) - base)
+        changes.append(base - force(q - dq[:, None], v - dv[:, None]))
+        before = system.event_functions(s, q, v, p, np)
+        if before is not None:
+            events.append((before, system.event_functions(s, q + dq[:, None], v + dv[:, None], p, np)))
+    ref = changes[0][:, :1]
+    scale = float(system.force_scale) * 1e-9 + 1e-9 * float(np.max(np.abs(ref), initial=0.0))
+    worst = max(float(np.max(np.abs(c - ref), initial=0.0)) for c in changes)
+    return worst, scale, events
+
+
 def check_input_map(system, p, basis=None) -> None:
-    """Check a declared ``input_map`` at a probe state (numpy): moving the state along directions
-    the map does not see (``C dq = C dq' = 0``) must change the force by the same amount at every
-    phase and every state, linearly (``-K_0 dq - C_0 dq'``), and leave the event functions unchanged.
+    """Check a declared ``input_map`` and ``output_map`` at probe states (numpy): moving the state
+    along directions the input map does not see (``C dq = C dq' = 0``) must change the force by
+    the same amount at every phase and every state, linearly (``-K_0 dq - C_0 dq'``), and leave
+    the event functions unchanged; moving it in any direction must change the force's part
+    off the output map's rows (``(I - O O^T) Q``) in the same way.
 
     **Raises:** ``ValueError`` naming the broken promise.
     """
@@ -293,36 +354,22 @@ def check_input_map(system, p, basis=None) -> None:
     basis = port_basis(system.input_map(p), n) if basis is None else basis
     if basis is None:
         return
-    _, null = basis
-    rng = np.random.default_rng(1)
-    s = np.array([0.0731, 0.3517, 0.8123])
-    xs = float(system.displacement_scale)
-    vs = xs * float(system.excitation_frequency(p))
-    fs = float(system.force_scale)
-    dq = null.T @ rng.standard_normal(null.shape[0]) * xs
-    dv = null.T @ rng.standard_normal(null.shape[0]) * vs
-
-    def force(q, v):
-        return np.asarray(system.force(s, q, v, p, "all", 0.0, np), dtype=float)
-
-    changes = []
-    for _ in range(2):
-        q = rng.standard_normal((n, s.size)) * 0.5 * xs
-        v = rng.standard_normal((n, s.size)) * 0.5 * vs
-        base = force(q, v)
-        changes.append(force(q + dq[:, None], v + dv[:, None]) - base)
-        changes.append(base - force(q - dq[:, None], v - dv[:, None]))
-        events = system.event_functions(s, q, v, p, np)
-        if events is not None:
-            moved = system.event_functions(s, q + dq[:, None], v + dv[:, None], p, np)
-            if not np.allclose(np.asarray(moved, float), np.asarray(events, float), rtol=1e-9,
-                               atol=1e-9 * xs):
-                raise ValueError(f"{name}.input_map: the event functions depend on the state outside C q "
-                                 "(declare those directions in the input map, or no input map)")
-    ref = changes[0][:, :1]
-    scale = fs * 1e-9 + 1e-9 * float(np.max(np.abs(ref)))
-    worst = max(float(np.max(np.abs(c - ref))) for c in changes)
+    worst, scale, events = _probe_changes(system, p, 1, basis[1], lambda f: f)
+    for before, after in events:
+        if not np.allclose(np.asarray(after, float), np.asarray(before, float), rtol=1e-9,
+                           atol=1e-9 * float(system.displacement_scale)):
+            raise ValueError(f"{name}.input_map: the event functions depend on the state outside C q "
+                             "(declare those directions in the input map, or no input map)")
     if not worst <= scale:
         raise ValueError(f"{name}.input_map: the force changes by {worst:.3g} N differently with the phase or the "
                          "state along directions with C dq = C dq' = 0 (it must be linear time-invariant there); "
                          "declare those directions in the input map, or no input map")
+    outputs = port_basis(system.output_map(p), n, "output_map")
+    if outputs is None:
+        return
+    off = outputs[1]
+    worst, scale, _ = _probe_changes(system, p, 2, np.eye(n), lambda f: off @ f)
+    if not worst <= scale:
+        raise ValueError(f"{name}.output_map: the force off its rows changes by {worst:.3g} N differently with the "
+                         "phase or the state (it must be linear time-invariant there); declare every coordinate "
+                         "the mesh acts on, or no output map")

@@ -267,12 +267,14 @@ class HarmonicBalance:
                                    and ports * self.block + 2 <= CONDENSED_MAX_PORTS * self.size):
                 return None
             condensed.check_input_map(system, p, basis)
+            outputs = condensed.output_basis(system, p)
             pieces = ()
             if system.coefficients_independent_of_parameter:
                 rule_np = tuple(np.asarray(a) for a in rule)
                 _, stiffness, damping = self._periodic_coefficients(system, p, rule_np, np)
-                pieces = jax.device_put(condensed.port_operator(stiffness, damping, basis[0], self.harmonics, np))
-            return condensed.CondensedOperator(jax.device_put(basis[0]), *pieces)
+                pieces = jax.device_put(condensed.port_operator(stiffness, damping, basis[0], outputs, self.harmonics,
+                                                                np))
+            return condensed.CondensedOperator(jax.device_put(basis[0]), jax.device_put(outputs), *pieces)
 
         return _FROZEN.get_or_make(self._content_key(system, "condensed", rule[0].shape), make)
 
@@ -474,8 +476,10 @@ class HarmonicBalance:
             v1 = fourier.differentiate(xc, self.harmonics, 1.0, jnp)
             mass = system.mass_matrix(p, jnp)
             mean = k_bar @ xc + w * (c_bar @ v1) + w**2 * (mass @ fourier.differentiate(v1, self.harmonics, 1.0, jnp))
-            y = (prepared.condensed.ports @ xc).reshape(-1)
-            ports = condensed.coordinate_major(k_ports @ y + w * (c_ports @ y), self.ndof)  # rows harmonic-major
+            pieces = prepared.condensed
+            y = (pieces.ports @ xc).T.reshape(-1)  # harmonic-major (condensed.port_matrix)
+            v = (k_ports @ y + w * (c_ports @ y)).reshape(self.block, -1)
+            ports = (pieces.outputs.T @ v.T).reshape(-1)  # (O (x) I) v, coordinate-major
             return mean.reshape(self.size) + ports - self._forcing(system, p, prepared)
         frozen = prepared.frozen
         if frozen is None:
@@ -768,30 +772,28 @@ class HarmonicBalance:
         if pieces.mean_stiffness is not None:
             return pieces.mean_stiffness, pieces.mean_damping, pieces.stiffness_ports, pieces.damping_ports
         _, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
-        return condensed.port_operator(stiffness, damping, pieces.ports, self.harmonics, jnp)
+        return condensed.port_operator(stiffness, damping, pieces.ports, pieces.outputs, self.harmonics, jnp)
 
     def _port_jacobian(self, z, p, system, prepared) -> condensed.PortJacobian:
-        """``dR/dz = A + U (C (x) I)`` (scaled) of :mod:`hbgear.engine.condensed`: ``A`` from the mean
-        periodic coefficients, ``U = (dR/dx - A)(C^T (x) I)`` from the port parts of ``K(s)``,
-        ``C(s)`` and ``m`` directional derivatives of ``Q_nl`` (``C`` orthonormal rows)."""
+        """``dR/dz = A + (O (x) I) U~ (C (x) I)`` (scaled) of :mod:`hbgear.engine.condensed`: ``A``
+        from the mean periodic coefficients, ``U~ = (O^T (x) I)(dR/dx - A)(C^T (x) I)`` from the
+        port parts of ``K(s)``, ``C(s)`` and ``m`` directional derivatives of ``Q_nl`` projected
+        on the outputs ``O`` (``C`` orthonormal rows, ``O`` orthonormal columns)."""
         n, H, B = self.ndof, self.harmonics, self.block
         pieces = prepared.condensed
-        right = pieces.ports.T  # (n, m)
-        m = right.shape[1]
         w = self.base_frequency(system, p)
         scale = system.displacement_scale / system.force_scale
         k_bar, c_bar, k_ports, c_ports = self._port_operator(system, p, prepared)
         u = k_ports + w * c_ports
         if not system.is_linear:
             x, extra = self._split(system, z)
-            t_q, t_v, g_q, g_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, right)
+            t_q, t_v, g_q, g_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, pieces.ports.T,
+                                                             pieces.outputs)
             # A holds the mean derivatives of Q_nl too (a mesh that is all nonlinear, backlash,
             # leaves Kb no stiffness on its coordinate): the mean Jacobian, as the structured
             # path's preconditioner
             k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
-
-            # U's rows harmonic-major (condensed.harmonic_major), as P_K, P_C
-            u = u - condensed.harmonic_major(t_q + w * condensed.times_d1(t_v, H, jnp))
+            u = u - condensed.port_matrix(t_q + w * condensed.times_d1(t_v, H, jnp))
         u = u * scale
         mass = system.mass_matrix(p, jnp)
         kw = w * jnp.arange(1, H + 1)[:, None, None]
@@ -806,18 +808,21 @@ class HarmonicBalance:
             mean = mean.at[:, k].set(0.0).at[k, k].set(1.0)
             keep = keep.at[k * B].set(0.0)
         return condensed.PortJacobian(mean, blocks, jnp.linalg.inv(mean), jnp.linalg.inv(blocks), u, pieces.ports,
-                                      keep)
+                                      pieces.outputs, keep)
 
-    def _nonlinear_port_blocks(self, x, extra, p, system, layout, right):
-        """``(T_q, T_v, Gb_q, Gb_v)``: :meth:`_nonlinear_jacobian`'s blocks times ``C^T (x) I``
-        ``(n, m, B, B)``, without the means ``Gb`` ``(n, m)`` of the sampled derivatives (returned
-        apart), from ``m`` directional derivatives (the columns of `right` ``(n, m)``)."""
+    def _nonlinear_port_blocks(self, x, extra, p, system, layout, right, left):
+        """``(T_q, T_v, Gb_q, Gb_v)``: :meth:`_nonlinear_jacobian`'s blocks between ``left (x) I`` and
+        ``right (x) I``, ``(r, m, B, B)``, without the means ``Gb`` ``(n, m)`` of the sampled
+        derivatives (returned apart, not projected: ``A`` holds all of them), from ``m``
+        directional derivatives (the columns of `right` ``(n, m)``), the blocks projected on the
+        rows of `left` ``(r, n)``."""
         n, H, N = self.ndof, self.harmonics, self.samples
         derivatives, (_, at_c, weight, delta) = self._nonlinear_derivatives(x, extra, p, system, layout, right)
+        means = jnp.mean(derivatives[..., :N], axis=-1)  # (1|2, n, m)
+        derivatives = jnp.einsum("ri,kijs->krjs", left, derivatives)
         coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N
-        means = jnp.real(coeff[..., 0])  # (1|2, n, m)
         coeff = jnp.concatenate([0.0 * coeff[..., :1], coeff[..., 1:]], axis=-1)
-        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, n, m, B, B)
+        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, r, m, B, B)
         blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, _jumps(derivatives[..., N:], weight), at_c)
         uses_q = system.nonlinear_force_uses_displacement
         t_q = blocks[0] if uses_q else jnp.zeros_like(blocks[0])
@@ -828,8 +833,8 @@ class HarmonicBalance:
             velocity = self._velocity(x, system, p)
             e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
                                             self.harmonics, self.nu, self.samples)
-            t_q = t_q + jnp.einsum("ijbd,jl->ilbd", e_q, right)
-            t_v = t_v + jnp.einsum("ijbd,jl->ilbd", e_v, right)
+            t_q = t_q + jnp.einsum("ri,ijbd,jl->rlbd", left, e_q, right)
+            t_v = t_v + jnp.einsum("ri,ijbd,jl->rlbd", left, e_v, right)
         return t_q, t_v, g_q, g_v
 
     @partial(jax.jit, static_argnums=0)

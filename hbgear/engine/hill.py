@@ -77,6 +77,16 @@ STEP_TOL = 1e-7
 #: sub-problem still sees as one complex pair: ``|a1 - a2|`` ~ 0.07 at 3800 rpm on the NLTV pair).
 SPLIT_OFFSET = 0.05
 
+#: A seed whose refinement fails while ``Im mu`` is within this of a multiple of 1/2 is first
+#: retried as two seeds on that line, ``Re mu -+ SPLIT_REAL_OFFSET + i k/2``, kept only if both land
+#: on real multipliers' families: the sub-problem merged two real multipliers into one complex
+#: pair (at 5000 rpm on the 8-DOF NLTV pair -0.742 and -0.599, exponents -0.0475 + i/2 and
+#: -0.0815 + i/2, seeded once at -0.0645 + 3.5251 i; the offsets of :data:`SPLIT_OFFSET` off the
+#: line land near -0.033 + 3.527 i, a copy of a complex family). On the line, two starts either
+#: side of the midpoint are each nearer their own exponent whatever the split.
+SPLIT_REAL_WINDOW = 0.05
+SPLIT_REAL_OFFSET = 0.02
+
 #: Points per stacked refinement: about this many bytes per stack of complex pencils (3 points at
 #: N = 130, all of a Duffing curve at N = 15). On the NLTV pair's 2406-point curve (N = 130) the
 #: Hill exponents took 12.1 s with 3 points per stack, 15.3 s with 7 and 15.1 s with 1 (medians
@@ -420,6 +430,12 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
             v[win] = vec_s[:, i]
             v /= np.linalg.norm(v)
             best = [_most_central_member(a0, a1, a2, mu_s[i], v, ndof, harmonics)]
+            if best[0] is None and (line := _real_line(np.array([mu_s[i]]))[0]) is not None:
+                # the seed may merge two real multipliers (SPLIT_REAL_WINDOW): a start on either side
+                best = [_most_central_member(a0, a1, a2, line + d, v, ndof, harmonics, fixed_steps=2)
+                        for d in (-SPLIT_REAL_OFFSET, SPLIT_REAL_OFFSET)]
+                if not all(b is not None and _is_self_conjugate(b[0], 2 * SELF_CONJUGATE_TOL) for b in best):
+                    best = [None]
             if best[0] is None:
                 # the seed may sit between two close exponents (a complex pair of the sub-problem
                 # that is a split real pair in the full problem): one start on either side
@@ -519,6 +535,38 @@ def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_w
     return mu, v, centre, converged
 
 
+def _real_line(mu):
+    """``Re mu + i k/2`` for the exponents within :data:`SPLIT_REAL_WINDOW` of a multiple of 1/2, else ``None``."""
+    mu = np.asarray(mu, dtype=complex)
+    half = np.round(2.0 * mu.imag) / 2.0
+    near = np.abs(mu.imag - half) <= SPLIT_REAL_WINDOW
+    return [complex(x.real, h) if ok else None for x, h, ok in zip(mu, half, near)]
+
+
+def _split_real_seeds(a0, a1, a2, owner, seed_mu, seed_v, mu, converged, ndof, harmonics):
+    """The failed seeds near a real multiplier's line (:data:`SPLIT_REAL_WINDOW`) replaced by two
+    starts on it, refined and walked (batched, the Newton update); a pair is kept converged only
+    if both land on real multipliers' families. Returns ``(owner, mu, converged)``."""
+    failed = np.flatnonzero(~converged)
+    line = _real_line(seed_mu[failed])
+    failed = np.asarray([f for f, x in zip(failed, line) if x is not None], dtype=int)
+    if failed.size == 0:
+        return owner, mu, converged
+    centre = np.asarray([x for x in line if x is not None])
+    starts = np.concatenate([centre - SPLIT_REAL_OFFSET, centre + SPLIT_REAL_OFFSET])
+    pair_owner = np.concatenate([owner[failed], owner[failed]])
+    pair_v = np.concatenate([seed_v[failed], seed_v[failed]])
+    r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, pair_owner, starts, pair_v, update="newton")
+    r_mu, _, _, r_ok = _batched_walk(a0, a1, a2, pair_owner, r_mu, r_v, r_ok, ndof, harmonics, update="newton")
+    r_ok &= np.abs(2.0 * r_mu.imag - np.round(2.0 * r_mu.imag)) <= 2 * SELF_CONJUGATE_TOL
+    both = r_ok[: failed.size] & r_ok[failed.size :]
+    r_ok = np.concatenate([both, both])
+    keep = np.ones(len(mu), dtype=bool)
+    keep[failed] = False
+    return (np.concatenate([owner[keep], pair_owner]), np.concatenate([mu[keep], r_mu]),
+            np.concatenate([converged[keep], r_ok]))
+
+
 def _batch_seed_harmonics(harmonics: int) -> int:
     """Seed window of the batched refinement: half the harmonics, at most SEED_HARMONICS."""
     return max(1, min(SEED_HARMONICS, harmonics // 2))
@@ -574,6 +622,8 @@ def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=Non
         mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0,
                                            update=update)
         mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, update=update)
+        owner, mu, converged = _split_real_seeds(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0,
+                                                 mu, converged, ndof, harmonics)
     out: list = [None] * m
     settled = np.ones(m, dtype=bool)
     np.logical_and.at(settled, owner, converged)

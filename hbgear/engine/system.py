@@ -98,6 +98,11 @@ shapes returned, ``is_linear`` at a probe state):
   ``HarmonicBalance(operator="auto")`` chooses it when it pays off). Checked at a probe state:
   moving the state along directions with ``C dq = C dq' = 0`` must change the force by the same
   amount at every phase and state, and leave the event functions unchanged.
+- ``output_map(p)`` -- ``None`` (default: every coordinate) or a matrix ``(r, ndof)`` whose rows
+  span the coordinates the non-LTI force acts on: ``Q + K_0 q + C_0 q'`` lies in their span for
+  every state (a force derived by virtual work from what the input map sees acts along
+  ``C^T``). With an input map, the condensed path then works with ``r (2H+1) x m (2H+1)``
+  port blocks instead of ``ndof (2H+1) x m (2H+1)``. Checked at a probe state with the input map.
 - ``arclength_mean_scales(p)`` -- ``None`` (default) or, shape ``(ndof,)``, the size of each
   coordinate's mean (in units of ``displacement_scale``) that counts as one unit of arclength in
   continuation; 1 leaves a coordinate as it is. A coordinate on a support far softer than the
@@ -190,6 +195,10 @@ class PeriodicSystem:
 
     def input_map(self, p):
         """``C`` ``(m, ndof)``: the combinations of the state the non-LTI force sees, or ``None`` (default)."""
+        return None
+
+    def output_map(self, p):
+        """``(r, ndof)``: rows spanning the coordinates the non-LTI force acts on, or ``None`` (default: all)."""
         return None
 
 

@@ -193,6 +193,23 @@ class GearSystem(PeriodicSystem):
                 rows.append(unit[lay.index("x_p")] - unit[lay.index("x_g")])
         return np.stack(rows)
 
+    def output_map(self, p):
+        """The coordinates the mesh and friction act on (virtual work, MODEL.md section 10): ``delta``
+        (the mesh force), the rows of the pinion and gear rotations ``a_p``, ``a_g`` (the friction
+        torques) and ``x_p - x_g`` (the friction force on the centres, opposite on the two). With
+        NLTV they are the input map's own rows; LTV sees only ``delta`` but acts on all four.
+        ``None`` unless the parameter is the speed (as :meth:`input_map`)."""
+        if self.parameter != "speed":
+            return None
+        model = self.model
+        lay = model.layout
+        projection = model.projection()
+        rows = [np.eye(lay.ndof)[0]]
+        rows += [np.asarray(projection[name], dtype=float) for name in ("a_p", "a_g")]
+        if model.bearings is not None:
+            rows.append(np.asarray(projection["x_p"], dtype=float) - np.asarray(projection["x_g"], dtype=float))
+        return np.stack(rows)
+
     @property
     def event_zero_capacity(self) -> tuple[int, int]:
         """Per-pair contact that may open: 32 sign changes and 4 excursions per mesh period (a
