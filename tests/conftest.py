@@ -1,9 +1,13 @@
 """Test-session settings for the long-lived test process.
 
-- No disk compilation cache (``HBGEAR_NO_CACHE``): the CLI, called in-process by some tests,
-  would otherwise turn on :mod:`hbgear.runtime`'s cache and read and write the user's
+- Not the user's disk compilation cache (``HBGEAR_NO_CACHE``): the CLI, called in-process by
+  some tests, would otherwise turn on :mod:`hbgear.runtime`'s cache and read and write
   ``~/.cache/hbgear/jax``; the tests of the cache itself run in subprocesses with their own
-  settings (tests/test_runtime.py).
+  settings (tests/test_runtime.py). Instead one throw-away cache for the run, made empty at its
+  start and shared by the workers, every program kept (no minimum compile time): the test files
+  compile many of the same programs (the reference pair's corrector, Hill's pencils, ...), and a
+  file after the first loads them. Five heavy files, two workers, empty cache at the start,
+  one run each: 193.8 s wall against 210.1 s without (2026-12-02).
 - JAX's in-memory compiled programs dropped after each test module: after ~1500 tests in one
   process the suite crashed inside XLA (abort / segmentation fault in test_structured, with and
   without the disk cache; each module alone passes) while every earlier module's programs were
@@ -16,11 +20,35 @@
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+import tempfile
 
 import pytest
 
 os.environ.setdefault("HBGEAR_NO_CACHE", "1")
+
+#: The run's compilation cache directory: made by the controlling process (or a run without
+#: workers) and handed to the workers it starts through the environment.
+_CACHE_ENV = "HBGEAR_TEST_RUN_JAX_CACHE"
+
+
+def pytest_configure(config):
+    directory = os.environ.get(_CACHE_ENV)
+    if directory is None:  # the controlling process, or a run without workers
+        directory = os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="hbgear-test-jax-cache-")
+        config._hbgear_made_cache = directory
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", directory)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+def pytest_unconfigure(config):
+    made = getattr(config, "_hbgear_made_cache", None)
+    if made is not None:
+        shutil.rmtree(made, ignore_errors=True)
+        os.environ.pop(_CACHE_ENV, None)
 
 
 #: Test files by their time in a two-worker run, longest first (seconds of the slowest ones, on a
