@@ -24,9 +24,10 @@ time-varying and nonlinear terms do not see them and the means in ``A`` see them
 its rows lie in ``range(O)``, so ``\tilde U = (O^T \otimes I)(J - A)(C^T \otimes I)``
 (``r B x m B``): ``m`` pointwise directional derivatives of ``Q_nl`` projected on ``O``, and the
 convolution matrices of ``O^T K(s) C^T``, ``O^T C(s) C^T`` -- no ``n B`` tangents and no
-``(n B)^2`` product. A force derived by virtual work acts on the coordinates it sees (its
-generalized force is ``C^T`` times something), so ``O = C^T`` (:func:`output_basis` checks it
-at the probe state); otherwise ``O = I``.
+``(n B)^2`` product. ``O`` is a basis of the system's declared ``output_map`` (a force derived
+by virtual work acts on the coordinates it sees: its generalized force is ``C^T`` times
+something, so the output map is then the input map), checked at the probe state with the input
+map (:func:`check_input_map`); without one, ``O = I``.
 
 A continuation step solves with the bordered matrix ``[[J, j], [row]]`` (``j = dR/dp``);
 it is ``diag(A, 1)`` plus a rank ``m B + 2`` term, so (Woodbury)
@@ -69,7 +70,8 @@ class CondensedOperator(NamedTuple):
     """The prepared pieces of the condensed path (a pytree of device arrays).
 
     **Fields:** `ports` ``(m, n)``: an orthonormal basis ``C`` of the rows of the declared input
-    map; `outputs` ``(r, n)``: ``O^T`` (:func:`output_basis`: ``C`` or the identity); when the
+    map; `outputs` ``(r, n)``: ``O^T`` (:func:`output_basis`: of the declared output map, or the
+    identity); when the
     system's coefficients do not depend on the parameter (else ``None``: built in the trace,
     :func:`port_operator`) the linear operator
     ``L(w) = A(w) + (O (x) I)(P_K + w P_C)(C (x) I)``: `mean_stiffness`, `mean_damping`
@@ -311,8 +313,9 @@ def output_basis(system, p) -> np.ndarray:
 
 def _probe_changes(system, p, seed, directions, outside):
     """Central changes of ``outside(Q)`` for a random move ``(dq, dq')`` in the span of the rows
-    of `directions`, at three phases and two random states (numpy), and the states' event
-    functions before and after the move (``None`` without events)."""
+    of `directions`, at three phases and two random states (numpy): ``(worst deviation from the
+    first change, its tolerance, [(event functions before, after the move)] per state)`` (the
+    list empty without events)."""
     n = system.ndof
     rng = np.random.default_rng(seed)
     s = np.array([0.0731, 0.3517, 0.8123])
