@@ -10,6 +10,7 @@ import csv
 import dataclasses
 import json
 import math
+import warnings
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -208,7 +209,10 @@ def gear():
     from hbgear.engine.continuation import sweep_method
 
     rj, r, fixed = residual_functions(HB_GEAR, GearSystem(model))
-    branch = continuation(rj, r, start.z, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
+    with warnings.catch_warnings():  # compiled, not the Python corrector after a failed trace
+        warnings.simplefilter("error", RuntimeWarning)
+        branch = continuation(rj, r, start.z, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000,
+                              args=fixed)
     return model, branch
 
 
@@ -255,8 +259,6 @@ def test_frc_command_writes_the_curve(tmp_path, gear):
 def test_jit_step_traces_closures_that_fill_caches_on_their_first_call():
     """HarmonicBalance builds its quadrature on the first eager call; a closure over a fresh
     instance must still run compiled (no fall-back warning), with the start compiled too."""
-    import warnings
-
     fresh = HarmonicBalance(1, 7, 1, 66)  # its own caches: nothing computed for it yet
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
@@ -284,7 +286,10 @@ def test_compiled_corrector_takes_the_gear_pair_as_arguments(gear):
     compiled = _JIT_CACHE[(rj, r, HB_GEAR.size)][0]
     programs = compiled._cache_size()
     guess = start_guess(other, HB_GEAR, GearSystem(other))
-    branch = continuation(rj, r, guess, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000, args=fixed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        branch = continuation(rj, r, guess, w0, w1, sweep_method(w0, w1), tolerance=1e-12, max_points=4000,
+                              args=fixed)
     assert compiled._cache_size() == programs  # no new trace for the new pair
     assert branch.status == Status.SUCCESS, branch.message
     start = solve_periodic(other, w0, harmonics=8, samples=64, tolerance=1e-12)

@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..condensed import lu_factor, lu_solve
 from ..newton import SUFFICIENT_DECREASE, NewtonStatus
 from .corrector import CHORD_ITERATION_WORK, LINE_SEARCH_MIN_STEP, _failure, _Point
 from .steps import _grown_step, _limited_step
@@ -68,11 +69,12 @@ def _running(condition, count):
 
 
 class _Factor(NamedTuple):
-    """The LU of ``A = [J; previous]`` at the last converged point (for the chord mode); with a
-    structured Jacobian `lu` is its factorisation and `piv` unused."""
+    """The LU of ``A = [J; previous]`` at the last converged point (for the chord mode): `lu`
+    and its row permutation `perm` (:func:`~hbgear.engine.condensed.lu_factor`); with a
+    structured Jacobian `lu` is its factorisation and `perm` unused."""
 
     lu: Any
-    piv: Any
+    perm: Any
     v: Any  # A^-1 e: the unnormalised tangent
     previous: Any  # the border row A was factored with
     usable: Any  # bool: a factorisation the chord mode may use
@@ -146,7 +148,7 @@ class _Chord(NamedTuple):
     """The chord step's pieces: ``B = A + e d^T``, ``d = row - previous_f``."""
 
     lu: Any
-    piv: Any
+    perm: Any
     v: Any
     d: Any
     denominator: Any  # 1 + d . v
@@ -164,17 +166,19 @@ def _structured(jz) -> bool:
 
 
 def _factor_bordered(jac, row):
-    """The factorisation of ``[jac; row]``: ``(lu, piv)`` of the matrix, or with a structured
-    ``jac = (R_z, column)`` its ``bordered_factor`` (and a placeholder pivot)."""
+    """The factorisation of ``[jac; row]``: ``(lu, perm)`` of the matrix, or with a structured
+    ``jac = (R_z, column)`` its ``bordered_factor`` (and a placeholder permutation). The
+    permutation is made once here, not at every solve (``jax.scipy.linalg.lu_solve`` would turn
+    the pivots into it at each of the ~4 solves a point)."""
     if isinstance(jac, tuple):
         return jac[0].bordered_factor(jac[1], row), jnp.zeros(1, np.int32)
-    return jax.scipy.linalg.lu_factor(jnp.concatenate([jac, row[None]], axis=0))
+    return lu_factor(jnp.concatenate([jac, row[None]], axis=0))
 
 
-def _solve_bordered(lu, piv, b):
+def _solve_bordered(lu, perm, b):
     if _structured_factor(lu):
         return lu.solve(b)
-    return jax.scipy.linalg.lu_solve((lu, piv), b)
+    return lu_solve(lu, perm, b)
 
 
 def _structured_factor(lu) -> bool:
@@ -233,19 +237,19 @@ def _tangent_and_factor(jac, previous):
     oriented along `previous`, and that LU as the next chord :class:`_Factor`."""
     unit_last = np.zeros(previous.shape[0])
     unit_last[-1] = 1.0
-    lu, piv = _factor_bordered(jac, previous)
-    raw = _solve_bordered(lu, piv, unit_last)
+    lu, perm = _factor_bordered(jac, previous)
+    raw = _solve_bordered(lu, perm, unit_last)
     ok = jnp.all(jnp.isfinite(raw))
     t = jax.lax.cond(ok, lambda: raw, lambda: jnp.linalg.svd(_dense(jac))[2][-1])
     t = t / jnp.linalg.norm(t)
-    return jnp.where(t @ previous >= 0, t, -t), _Factor(lu, piv, raw, previous, ok)
+    return jnp.where(t @ previous >= 0, t, -t), _Factor(lu, perm, raw, previous, ok)
 
 
 # ------------------------------------------------------------------------------ chord turn
 def _chord_step(eq: _Equations, chord: _Chord, y, r):
     """Modified Newton step with ``B = [J_f; row]`` from the LU of ``A = [J_f; previous_f]``:
     ``B^-1 b = u - v (d . u) / (1 + d . v)``, ``u = A^-1 b``, ``b = -(R, row . y - target)``."""
-    u = _solve_bordered(chord.lu, chord.piv, -jnp.append(r, eq.row @ y - eq.target))
+    u = _solve_bordered(chord.lu, chord.perm, -jnp.append(r, eq.row @ y - eq.target))
     return y + u - chord.v * (chord.d @ u) / chord.denominator
 
 
@@ -263,7 +267,9 @@ def _chord_turn(eq: _Equations, chord: _Chord, s: _Iterate) -> _Iterate:
     last = contracted & ~done & (norm * (norm / s.norm) <= 0.5 * eq.tolerance) & (it < eq.max_iter)
     go_on = contracted & ~done & ~last & (it < eq.max_iter)
     restart = ~done & ~go_on & ~last  # back to the predictor, Newton
-    cand = jnp.where(last, _chord_step(eq, chord, cand, r), cand)
+    # a conditional, not a select: the speculative step is a bordered solve (at 8 DOF, H = 32, as
+    # long as the residual) that a select would make at every chord turn
+    cand = jax.lax.cond(last, lambda: _chord_step(eq, chord, cand, r), lambda: cand)
     it = jnp.where(last, it + 1, it)
     # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
     return s._replace(it=jnp.where(go_on, it, 0).astype(jnp.int32), y=jnp.where(restart, s.y, cand),
@@ -341,7 +347,7 @@ def _correct(eq: _Equations, previous, factor: _Factor, keep: _Factor):
     """
     size, i32 = eq.size, jnp.int32
     d = eq.row - factor.previous
-    chord = _Chord(factor.lu, factor.piv, factor.v, d, 1.0 + d @ factor.v)
+    chord = _Chord(factor.lu, factor.perm, factor.v, d, 1.0 + d @ factor.v)
     start_chord = factor.usable & (eq.max_iter > 0)
     r0 = jax.lax.cond(start_chord, lambda: _residual_of(eq, eq.y_pred), lambda: jnp.zeros(size))
     norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
