@@ -25,6 +25,9 @@ from hbgear.config import parse_config, read_toml
 from hbgear.errors import ConfigError
 from hbgear.gear.solve import rpm_to_rad_s, solve_periodic
 
+# a failed trace of the compiled corrector falls back to the Python one with a warning: here an error
+pytestmark = pytest.mark.filterwarnings("error:jit_step:RuntimeWarning")
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "bearings.toml"
 SHAFTS = dict(drive_inertia_kgm2=5e-3, load_inertia_kgm2=1e-2, drive_stiffness_Nm_per_rad=2e5,

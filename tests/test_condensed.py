@@ -25,6 +25,9 @@ from hbgear.engine.system import check_system
 from hbgear.gear.solve import rpm_to_rad_s
 from hbgear.gear.system import GearSystem
 
+# a failed trace of the compiled corrector falls back to the Python one with a warning: here an error
+pytestmark = pytest.mark.filterwarnings("error:jit_step:RuntimeWarning")
+
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "bearings.toml"
 SHAFTS = dict(drive_inertia_kgm2=5e-3, load_inertia_kgm2=1e-2, drive_stiffness_Nm_per_rad=2e5,
               load_stiffness_Nm_per_rad=3e5, damping_ratio=0.02)
