@@ -413,24 +413,49 @@ def _segment_turn(problem, max_iter, tolerance, scale, use_chord, budget, contro
     return jax.lax.cond(regular, lambda: taken, lambda: refused)
 
 
+def _signature(args):
+    """What a trace of `args` depends on: their tree structure and each leaf's shape and dtype
+    (``None`` if that is not hashable)."""
+    leaves, tree = jax.tree_util.tree_flatten(tuple(args))
+    try:
+        key = (tree, tuple((np.shape(leaf), np.result_type(leaf).str) for leaf in leaves))
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
 def _jit_corrector(residual_and_jacobians, residual, size):
     """The corrector of :func:`~.corrector._python_corrector`, and the regular continuation steps
     around it, as one compiled JAX function (``advance``), and ``no_factor`` (an unusable chord LU).
     """
     problem = (residual_and_jacobians, residual, size)
+    structured_lu: dict = {}  # abstract signature of `args` -> zeros of the structured LU, or None (dense)
 
     def no_factor(previous, xp=jnp, args=()):
         """An unusable factorisation: zeros of the dense LU's shape or, when the Jacobian of these
-        `args` is structured, of its factorisation's (found by an abstract evaluation)."""
-        if not _jacobian_is_structured(residual_and_jacobians, size, args):
+        `args` is structured, of its factorisation's (found by an abstract evaluation, once per
+        signature of `args`: a trace of the residual functions costs milliseconds of Python,
+        a fifth of a Duffing curve of 167 points)."""
+        key = _signature(args)
+        if key is not None and key in structured_lu:
+            lu = structured_lu[key]
+        else:
+            lu = None
+            if _jacobian_is_structured(residual_and_jacobians, size, args):
+
+                def factor(a, prev):
+                    eq = _Equations(*problem, 1.0, a, prev, prev, 0.0, 0, 0.0)
+                    lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
+                    return lu
+
+                lu = _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
+            if key is not None:
+                if len(structured_lu) >= 8:
+                    structured_lu.pop(next(iter(structured_lu)))
+                structured_lu[key] = lu
+        if lu is None:
             return _no_factor(size, previous, xp)
-
-        def factor(a, prev):
-            eq = _Equations(*problem, 1.0, a, prev, prev, 0.0, 0, 0.0)
-            lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
-            return lu
-
-        lu = _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
         return _Factor(lu, jnp.zeros(1, np.int32), jnp.zeros(size + 1), previous, jnp.asarray(False))
 
     @jax.jit
