@@ -39,6 +39,7 @@ cache off; ``HBGEAR_MALLOC=default`` keeps glibc's thresholds.
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -52,18 +53,36 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("HBGEAR_CACHE_DIR", default))
 
 
+#: The first JAX release whose programs loaded from the disk cache compute what they computed when
+#: compiled: with jax/jaxlib 0.5.3 a ``while_loop`` around a matrix product, loaded from the cache,
+#: returned its initial state (the compiled continuation corrector gave zero tangents and a curve
+#: that never ended); 0.6.2 and later were checked.
+CACHE_SAFE_JAX = (0, 6, 2)
+
+
+def _release(version: str) -> tuple[int, ...]:
+    """``"0.10.2"`` -> ``(0, 10, 2)``; the first three numbers of a version string."""
+    return tuple(int(number) for number in re.findall(r"\d+", version)[:3])
+
+
 def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | None:
     """Keep compiled XLA programs on disk across runs; **returns** the directory, or ``None`` when
-    ``HBGEAR_NO_CACHE`` is set or the directory cannot be created."""
+    ``HBGEAR_NO_CACHE`` is set, the directory cannot be created, or the installed JAX is older than
+    :data:`CACHE_SAFE_JAX` (a warning then says so)."""
     if os.environ.get("HBGEAR_NO_CACHE"):
+        return None
+    import jax
+
+    if _release(jax.__version__) < CACHE_SAFE_JAX:
+        warnings.warn(f"jax {jax.__version__}: the disk compilation cache stays off (programs loaded from it "
+                      f"can return wrong results before jax {'.'.join(map(str, CACHE_SAFE_JAX))}; upgrade jax)",
+                      RuntimeWarning, stacklevel=2)
         return None
     directory = Path(path) if path is not None else default_cache_dir()
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
-    import jax
-
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
     return directory

@@ -101,3 +101,45 @@ def test_configure_limits_blas_to_one_thread_unless_declined(setting, expected):
         assert done == "True" and set(after) == {1}
     else:
         assert done == "False" and after == before
+
+
+def test_the_disk_cache_stays_off_with_a_jax_whose_cached_programs_are_wrong(monkeypatch, tmp_path):
+    import jax
+
+    from hbgear import runtime
+
+    assert runtime._release("0.10.2") == (0, 10, 2) and runtime._release("0.6.2.dev20250601") == (0, 6, 2)
+    monkeypatch.setattr(jax, "__version__", "0.5.3")
+    monkeypatch.delenv("HBGEAR_NO_CACHE", raising=False)
+    with pytest.warns(RuntimeWarning, match="jax 0.5.3: the disk compilation cache stays off"):
+        assert runtime.enable_compilation_cache(tmp_path / "cache") is None
+    assert not (tmp_path / "cache").exists()
+
+
+def test_a_corrector_loaded_from_the_disk_cache_gives_the_compiled_ones_answer(tmp_path):
+    """A second compiled continuation corrector of the same problem is loaded from the disk cache
+    (a new trace, the same program): its plain run returns the first one's tangent, bit for bit.
+    With jax 0.5.3 the loaded program skipped its while loop and returned zeros."""
+    out = _run("""
+        import numpy as np, jax.numpy as jnp, hbgear
+        assert hbgear.runtime.configure(threads=False)["cache_dir"]
+        import jax; jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        from hbgear.engine.hb import HarmonicBalance
+        from hbgear.engine.system import Duffing
+        from hbgear.engine.continuation import _Compiled
+        from hbgear.engine.continuation.compiled import _jit_corrector
+        hb, duffing = HarmonicBalance(1, 3, 1, 16), Duffing(damping=0.02, stiffness=1.0, cubic=0.1, forcing=0.05)
+        rj = lambda z, p: hb.residual_and_jacobians(jnp.asarray(z), p, duffing)
+        r = lambda z, p: hb.residual(jnp.asarray(z), p, duffing)
+        y = np.append(np.linspace(0.1, -0.2, hb.size), 0.9); row = np.eye(hb.size + 1)[-1]
+        tangents = []
+        for _ in range(2):
+            corrector = _Compiled(_jit_corrector(rj, r, hb.size), chord=True, scale=1.0)
+            tangents.append(corrector(y, row, row @ y, row, 0, np.inf).tangent)
+        print("norms", *(float(np.linalg.norm(t)) for t in tangents))
+        print("difference", float(np.abs(tangents[0] - tangents[1]).max()))
+        """, HBGEAR_CACHE_DIR=str(tmp_path / "cache"))
+    norms = [float(v) for v in out.split("norms")[1].split()[:2]]
+    assert norms[0] == pytest.approx(1.0, abs=1e-12), out
+    assert float(out.split("difference")[1].split()[0]) == 0.0, out
+    assert any((tmp_path / "cache").iterdir()), "nothing was written to the disk cache"
