@@ -413,12 +413,16 @@ def _segment_turn(problem, max_iter, tolerance, scale, use_chord, budget, contro
     return jax.lax.cond(regular, lambda: taken, lambda: refused)
 
 
+def _dtype(leaf) -> np.dtype:
+    return np.dtype(leaf.dtype) if hasattr(leaf, "dtype") else np.result_type(leaf)
+
+
 def _signature(args):
     """What a trace of `args` depends on: their tree structure and each leaf's shape and dtype
     (``None`` if that is not hashable)."""
     leaves, tree = jax.tree_util.tree_flatten(tuple(args))
     try:
-        key = (tree, tuple((np.shape(leaf), np.result_type(leaf).str) for leaf in leaves))
+        key = (tree, tuple((np.shape(leaf), _dtype(leaf).str) for leaf in leaves))
         hash(key)
     except TypeError:
         return None
