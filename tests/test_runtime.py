@@ -143,3 +143,18 @@ def test_a_corrector_loaded_from_the_disk_cache_gives_the_compiled_ones_answer(t
     assert norms[0] == pytest.approx(1.0, abs=1e-12), out
     assert float(out.split("difference")[1].split()[0]) == 0.0, out
     assert any((tmp_path / "cache").iterdir()), "nothing was written to the disk cache"
+
+
+def test_the_cli_says_in_one_line_that_the_cache_stays_off_with_an_old_jax(tmp_path):
+    example = os.path.join(os.path.dirname(__file__), "..", "examples", "paper_table1.toml")
+    out = _run(f"""
+        import sys, jax
+        jax.__version__ = "0.5.3"
+        from hbgear.cli import main
+        sys.exit(main(["solve", {example!r}, "--speed", "3000", "--set", "solver.harmonics=4",
+                       "--set", "solver.time_samples=16", "--out", {str(tmp_path / "out")!r}]))
+        """, HBGEAR_CACHE_DIR=str(tmp_path / "cache"))
+    said = [line for line in out.splitlines() if "warning" in line]
+    assert said == ["hbgear: warning: jax 0.5.3: the disk compilation cache stays off (programs loaded from it "
+                    "can return wrong results before jax 0.6.2; upgrade jax)"], out
+    assert "3000 rpm: DTE rms" in out and not (tmp_path / "cache").exists()

@@ -28,6 +28,7 @@ import contextlib
 import importlib
 import math
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -247,7 +248,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         out_dir = args.out if args.out is not None else Path("hbgear-out") / command.name
         created = not out_dir.exists()
         out_dir = prepare_out_dir(out_dir)
-        runtime.configure()  # one XLA thread, the disk compilation cache: before any computation
+        with warnings.catch_warnings(record=True) as said:  # e.g. a jax too old for the disk cache
+            warnings.simplefilter("always")
+            runtime.configure()  # one XLA thread, the disk compilation cache: before any computation
+        for warning in said:
+            print(f"hbgear: warning: {warning.message}", file=sys.stderr)
         status = command.run(config, args, out_dir)
         return EXIT_OK if status is None else int(status)
     except _UsageError as exc:
