@@ -13,12 +13,16 @@ point over the points after it; once to compile, then ``repeats`` rounds in whic
 5000 rpm on the solution there (dense matrices on both paths), after one compiling call.
 Medians; ratios to the 2-DOF model of the same run.
 
-``--blas-threads N`` sets ``OPENBLAS_NUM_THREADS`` (and the OpenMP/MKL equivalents) before numpy
-is imported: on a shared 2-core machine the multi-threaded LAPACK factorisations above ~300
-unknowns (the dense path's LU, Hill's eigenvalues) can be slower by one or two orders of
-magnitude than with one thread.
+The process runs as the ``hbgear`` command runs (:func:`hbgear.runtime.configure` before JAX
+starts: one XLA thread, one BLAS thread); ``--library-defaults`` leaves JAX's thread pool and
+the BLAS threads as the libraries set them, and ``--blas-threads N`` then sets
+``OPENBLAS_NUM_THREADS`` (and the OpenMP/MKL equivalents) before numpy is imported: on a shared
+2-core machine the multi-threaded LAPACK factorisations above ~300 unknowns (the dense path's
+LU, Hill's eigenvalues) can be slower by one or two orders of magnitude than with one thread.
+Besides the ratio per point, the table gives the ratio per curve (the whole range: the 8-DOF
+curve takes fewer, larger steps).
 
-Run: ``python benchmarks/bench_bearings.py [--quick] [--blas-threads 1]``.
+Run: ``python benchmarks/bench_bearings.py [--quick] [--library-defaults [--blas-threads 1]]``.
 """
 
 from __future__ import annotations
@@ -130,6 +134,9 @@ def run(quick: bool = False) -> dict:
         hill = {dof: _hill_time(m, repeats) for dof, m in ms.items()}
         results[coupling] = {"per_point_s": med, "points": points, "hill_s": hill,
                              "point_ratio": {key: med[key] / med[2, "dense"] for key in med},
+                             # the whole range (the points after the start): per point times points
+                             "curve_ratio": {d: med[d, "auto"] * (points[d, "auto"] - 1)
+                                             / (med[2, "dense"] * (points[2, "dense"] - 1)) for d in ms},
                              "hill_ratio": {d: hill[d] / hill[2] for d in ms},
                              "condensed": {key: curve.condensed for key, curve in curves.items()}}
         print(f"{coupling}: " + "; ".join(f"{d} DOF {op} {1e3 * med[d, op]:.2f} ms/point ({points[d, op]} points)"
@@ -139,12 +146,13 @@ def run(quick: bool = False) -> dict:
 
 def table(results: dict) -> str:
     lines = [f"{'coupling':8s} {'DOF':>4s} {'dense ms/pt':>11s} {'x 2-DOF':>8s} {'auto ms/pt':>10s} {'x 2-DOF':>8s} "
-             f"{'Hill ms':>8s} {'x 2-DOF':>8s}"]
+             f"{'points':>6s} {'curve x':>8s} {'Hill ms':>8s} {'x 2-DOF':>8s}"]
     for coupling, r in results.items():
         for d in (2, 6, 8):
             lines.append(f"{coupling:8s} {d:4d} {1e3 * r['per_point_s'][d, 'dense']:11.2f} "
                          f"{r['point_ratio'][d, 'dense']:8.2f} {1e3 * r['per_point_s'][d, 'auto']:10.2f} "
-                         f"{r['point_ratio'][d, 'auto']:8.2f} {1e3 * r['hill_s'][d]:8.1f} {r['hill_ratio'][d]:8.2f}")
+                         f"{r['point_ratio'][d, 'auto']:8.2f} {r['points'][d, 'auto']:6d} {r['curve_ratio'][d]:8.2f} "
+                         f"{1e3 * r['hill_s'][d]:8.1f} {r['hill_ratio'][d]:8.2f}")
     return "\n".join(lines)
 
 
@@ -153,8 +161,17 @@ if __name__ == "__main__":
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--blas-threads", type=int, default=None,
                         help="OPENBLAS/OMP/MKL threads, set before numpy is imported (default: the library's)")
+    parser.add_argument("--library-defaults", action="store_true",
+                        help="JAX's thread pool and the BLAS threads as the libraries set them, not as the hbgear "
+                             "command runs")
     args = parser.parse_args()
     if args.blas_threads is not None:
+        if not args.library_defaults:
+            parser.error("--blas-threads goes with --library-defaults (the hbgear runtime uses one BLAS thread)")
         for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[name] = str(args.blas_threads)
+    if not args.library_defaults:
+        from hbgear import runtime
+
+        print("# runtime:", runtime.configure(), flush=True)
     print(table(run(args.quick)))
