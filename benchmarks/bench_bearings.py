@@ -13,8 +13,9 @@ point over the points after it; once to compile, then ``repeats`` rounds in whic
 5000 rpm on the solution there (dense matrices on both paths), after one compiling call.
 Medians; ratios to the 2-DOF model of the same run.
 
-The process runs as the ``hbgear`` command runs (:func:`hbgear.runtime.configure` before JAX
-starts: one XLA thread, one BLAS thread); ``--library-defaults`` leaves JAX's thread pool and
+Run as a script, the process is set up as the ``hbgear`` command sets it up
+(:func:`hbgear.runtime.configure` before JAX starts: one XLA thread, one BLAS thread; ``run.py``
+calls :func:`run` in its own process as it is); ``--library-defaults`` leaves JAX's thread pool and
 the BLAS threads as the libraries set them, and ``--blas-threads N`` then sets
 ``OPENBLAS_NUM_THREADS`` (and the OpenMP/MKL equivalents) before numpy is imported: on a shared
 2-core machine the multi-threaded LAPACK factorisations above ~300 unknowns (the dense path's

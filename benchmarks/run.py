@@ -178,6 +178,8 @@ def _run(q, nlvib=None):
                   f"{r['point_ratio'][8, 'dense']:.2f}x", ""),
                  ("8", f"{coupling} per continuation point, 6 DOF / 2 DOF (auto path)",
                   f"{r['point_ratio'][6, 'auto']:.2f}x", ""),
+                 ("8", f"{coupling} per curve (the same range), 8 DOF / 2 DOF (auto path)",
+                  f"{r['curve_ratio'][8]:.2f}x", ""),
                  ("8", f"{coupling} per Hill evaluation, 8 DOF / 2 DOF", f"{r['hill_ratio'][8]:.2f}x", "")]
     print("\n## summary (one run, this machine)")
     print(f"{'#':2s} {'measure':58s} {'measured':>18s} {'goal':>9s}")
