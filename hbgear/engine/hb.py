@@ -40,7 +40,6 @@ the ports. :meth:`HarmonicBalance.residual_and_jacobians` and the Hill matrices 
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 from functools import lru_cache, partial
 from typing import Any, NamedTuple
@@ -50,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import condensed, events, fourier, structured
+from .caching import BoundedCache
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 
 
@@ -909,32 +909,8 @@ def _has_tracer(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-class _BoundedCache:
-    """At most `size` entries keyed on content (hashable keys built from values, never ``id()``);
-    the least recently used entry leaves first."""
-
-    def __init__(self, size: int):
-        self.size = size
-        self._data: OrderedDict = OrderedDict()
-
-    def get_or_make(self, key, make):
-        if key in self._data:
-            self._data.move_to_end(key)
-            return self._data[key]
-        value = self._data[key] = make()
-        if len(self._data) > self.size:
-            self._data.popitem(last=False)
-        return value
-
-    def clear(self) -> None:
-        self._data.clear()
-
-    def __len__(self) -> int:
-        return len(self._data)
-
-
 #: Mesh-period rules per (breakpoints, R); frozen operators per (discretisation, system content);
 #: jump layouts per (discretisation, breakpoints).
-_RULES = _BoundedCache(64)
-_FROZEN = _BoundedCache(64)
-_JUMPS = _BoundedCache(64)
+_RULES = BoundedCache(64)
+_FROZEN = BoundedCache(64)
+_JUMPS = BoundedCache(64)

@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..caching import BoundedCache
 from ..condensed import lu_factor, lu_solve
 from ..newton import SUFFICIENT_DECREASE, NewtonStatus
 from .corrector import CHORD_ITERATION_WORK, LINE_SEARCH_MIN_STEP, _failure, _Point
@@ -434,30 +435,27 @@ def _jit_corrector(residual_and_jacobians, residual, size):
     around it, as one compiled JAX function (``advance``), and ``no_factor`` (an unusable chord LU).
     """
     problem = (residual_and_jacobians, residual, size)
-    structured_lu: dict = {}  # abstract signature of `args` -> zeros of the structured LU, or None (dense)
+    structured_lu = BoundedCache(8)  # abstract signature of `args` -> zeros of the structured LU, or None (dense)
 
     def no_factor(previous, xp=jnp, args=()):
         """An unusable factorisation: zeros of the dense LU's shape or, when the Jacobian of these
         `args` is structured, of its factorisation's (found by an abstract evaluation, once per
         signature of `args`: a trace of the residual functions costs milliseconds of Python,
         a fifth of a Duffing curve of 167 points)."""
+
+        def zeros():
+            if not _jacobian_is_structured(residual_and_jacobians, size, args):
+                return None
+
+            def factor(a, prev):
+                eq = _Equations(*problem, 1.0, a, prev, prev, 0.0, 0, 0.0)
+                lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
+                return lu
+
+            return _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
+
         key = _signature(args)
-        if key is not None and key in structured_lu:
-            lu = structured_lu[key]
-        else:
-            lu = None
-            if _jacobian_is_structured(residual_and_jacobians, size, args):
-
-                def factor(a, prev):
-                    eq = _Equations(*problem, 1.0, a, prev, prev, 0.0, 0, 0.0)
-                    lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
-                    return lu
-
-                lu = _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
-            if key is not None:
-                if len(structured_lu) >= 8:
-                    structured_lu.pop(next(iter(structured_lu)))
-                structured_lu[key] = lu
+        lu = zeros() if key is None else structured_lu.get_or_make(key, zeros)
         if lu is None:
             return _no_factor(size, previous, xp)
         return _Factor(lu, jnp.zeros(1, np.int32), jnp.zeros(size + 1), previous, jnp.asarray(False))
