@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import fourier
+from .typed_jit import typed_jit
 
 __all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "breakpoint_instants", "declared", "crossings", "crossings_compiled",
            "jump_correction", "jump_jacobian", "state_at"]
@@ -189,7 +190,7 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     return t, jnp.concatenate([valid, excursion, excursion], axis=1)
 
 
-@partial(jax.jit, static_argnums=(4, 5))
+@partial(typed_jit, static_argnums=(4, 5))
 def crossings_compiled(system, p, xc, vc, nu: int, samples: int):
     """:func:`crossings` compiled (the system a pytree argument), for read-outs point by point."""
     return crossings(system, p, xc, vc, nu, samples)

@@ -51,6 +51,7 @@ import numpy as np
 from . import condensed, events, fourier, structured
 from .caching import BoundedCache
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
+from .typed_jit import typed_jit
 
 
 __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions",
@@ -651,7 +652,7 @@ class HarmonicBalance:
         """
         return self._hill_matrices_jit(z, p, system, self.prepare(system) if prepared is None else prepared)
 
-    @partial(jax.jit, static_argnums=0)
+    @partial(typed_jit, static_argnums=0)
     def _residual_jit(self, z, p, system, prepared):
         return self._residual(z, p, system, prepared)
 
@@ -743,12 +744,12 @@ class HarmonicBalance:
             jac = jac.at[:, slot].set(0.0).at[slot, slot].add(1.0)
         return jac
 
-    @partial(jax.jit, static_argnums=0)
+    @partial(typed_jit, static_argnums=0)
     def _residual_and_jacobian_jit(self, z, p, system, prepared):
         operator = self.linear_operator(system, p, prepared)
         return self._residual(z, p, system, prepared, operator), self._jacobian(z, p, system, prepared, operator)
 
-    @partial(jax.jit, static_argnums=0)
+    @partial(typed_jit, static_argnums=0)
     def _residual_and_jacobians_jit(self, z, p, system, prepared):
         # R and dR/dp as ONE directional derivative in p (its primal is R; a joint jacfwd would
         # push all size+1 tangents through the operator's construction), dR/dz at a fixed operator
@@ -760,7 +761,7 @@ class HarmonicBalance:
         :class:`~hbgear.engine.condensed.PortJacobian` (`prepared` must hold the condensed pieces)."""
         return self._residual_and_port_jacobians_jit(z, p, system, prepared)
 
-    @partial(jax.jit, static_argnums=0)
+    @partial(typed_jit, static_argnums=0)
     def _residual_and_port_jacobians_jit(self, z, p, system, prepared):
         r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
         return r, self._port_jacobian(z, p, system, prepared), jp
@@ -837,7 +838,7 @@ class HarmonicBalance:
             t_v = t_v + jnp.einsum("ri,ijbd,jl->rlbd", left, e_v, right)
         return t_q, t_v, g_q, g_v
 
-    @partial(jax.jit, static_argnums=0)
+    @partial(typed_jit, static_argnums=0)
     def _hill_matrices_jit(self, z, p, system, prepared):
         x, extra = self._split(system, z)
         lin, _, c_conv = self.linear_operator(system, p, prepared)

@@ -129,12 +129,14 @@ def _pencil_function(hb, batched: bool):
         import jax
         import jax.numpy as jnp
 
+        from .typed_jit import typed_jit
+
         def pencil(z, p, system, prepared):
             a0, d1, d2 = hb._hill_matrices_jit(z, p, system, prepared)
             w = hb.base_frequency(system, p)
             return jnp.stack([a0, w * d1, (w * w) * d2])
 
-        _PENCIL_FUNCTIONS[key] = jax.jit(jax.vmap(pencil, in_axes=(0, 0, None, None)) if batched else pencil)
+        _PENCIL_FUNCTIONS[key] = typed_jit(jax.vmap(pencil, in_axes=(0, 0, None, None)) if batched else pencil)
     return _PENCIL_FUNCTIONS[key]
 
 

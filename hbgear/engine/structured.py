@@ -48,6 +48,7 @@ import scipy.fft
 
 from . import fourier
 from .krylov import KrylovInfo, gmres
+from .typed_jit import typed_jit
 
 __all__ = ["StructuredOperator", "Linearization", "StructuredJacobian", "prepare_structured", "product_samples",
            "linear_response", "linearize"]
@@ -183,7 +184,7 @@ def _mean_blocks(hb, lin: Linearization, free_slot):
     return mean, blocks
 
 
-@partial(jax.jit, static_argnums=0)
+@partial(typed_jit, static_argnums=0)
 def _linearize_jit(hb, z, p, system, prepared):
     x, extra = hb._split(system, z)
     _, stiffness, damping = _operator_samples(hb, system, p, prepared)

@@ -39,6 +39,7 @@ import numpy as np
 from ..caching import BoundedCache
 from ..condensed import lu_factor, lu_solve
 from ..newton import SUFFICIENT_DECREASE, NewtonStatus
+from ..typed_jit import node_types, typed_jit
 from .corrector import CHORD_ITERATION_WORK, LINE_SEARCH_MIN_STEP, _failure, _Point
 from .steps import _grown_step, _limited_step
 
@@ -419,11 +420,12 @@ def _dtype(leaf) -> np.dtype:
 
 
 def _signature(args):
-    """What a trace of `args` depends on: their tree structure and each leaf's shape and dtype
-    (``None`` if that is not hashable)."""
+    """What a trace of `args` depends on: their tree structure with its classes (the structure
+    alone does not tell all classes apart: :mod:`~hbgear.engine.typed_jit`) and each leaf's shape
+    and dtype (``None`` if that is not hashable)."""
     leaves, tree = jax.tree_util.tree_flatten(tuple(args))
     try:
-        key = (tree, tuple((np.shape(leaf), _dtype(leaf).str) for leaf in leaves))
+        key = (tree, node_types(tuple(args)), tuple((np.shape(leaf), _dtype(leaf).str) for leaf in leaves))
         hash(key)
     except TypeError:
         return None
@@ -460,7 +462,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
             return _no_factor(size, previous, xp)
         return _Factor(lu, jnp.zeros(1, np.int32), jnp.zeros(size + 1), previous, jnp.asarray(False))
 
-    @jax.jit
+    @typed_jit
     def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
                 controls, args=()):
         """Corrector runs from ``y_pred`` and then, while each is a regular continuation step from
@@ -497,13 +499,14 @@ class _Compiled:
     with `chord` it keeps the LU of the last converged point for the next call."""
 
     def __init__(self, compiled, chord: bool, scale: float, controls=None, args=()):
-        self.advance, no_factor = compiled
+        advance, no_factor = compiled
+        self.args = tuple(args)
+        self.advance = advance.typed_for(args=self.args)  # the classes of the system walked once, not per call
         self.chord, self.scale = bool(chord), float(scale)
         self.controls = SegmentControls(*(np.float64(c) for c in (np.zeros(9) if controls is None else controls)))
         self.last = None
         self.empty = None
         self.no_factor = no_factor
-        self.args = tuple(args)
 
     def _factor(self, previous):
         if self.chord and self.last is not None:
@@ -516,7 +519,7 @@ class _Compiled:
     def _run(self, y_pred, row, target, previous, max_iter, tolerance, y0, t0, ds0, budget):
         return self.advance(y_pred, row, float(target), previous, int(max_iter), float(tolerance),
                             self._factor(previous), self.scale, self.chord, y0, t0, float(ds0), int(budget),
-                            self.controls, self.args)
+                            self.controls, args=self.args)
 
     def _result(self, pending, factor, max_iter):
         """A corrector run's packed outcome -> _Point | _Failure (keeps the LU if converged)."""
