@@ -11,7 +11,7 @@ jitted function, each class's call in turn: 7 to 13 of them got another class's 
 processes; which ones changes from process to process, as class hashes follow memory addresses).
 
 :func:`typed_jit` adds the classes of every node of its dynamic arguments
-(:func:`node_types`, about 15 us for the 8-DOF gear system) as one more static argument, so the
+(:func:`node_types`: a few microseconds a call, its walk memoised per structure) as one more static argument, so the
 compiled program is chosen by class identity too. Use it for every compiled function that takes
 a system (or anything holding user classes) as a traced argument.
 """
@@ -33,9 +33,21 @@ def _types_of(treedef) -> tuple:
     return own
 
 
+#: node_types per tree structure: a dict compares the full hashes first (they differ between
+#: classes) and only then the broken equality, so a structure finds its own entry.
+_TYPES: dict = {}
+_TYPES_SIZE = 256
+
+
 def node_types(tree) -> tuple:
     """The class of every node of `tree`'s structure, depth first (leaves left out)."""
-    return _types_of(jax.tree_util.tree_structure(tree))
+    structure = jax.tree_util.tree_structure(tree)
+    types = _TYPES.get(structure)
+    if types is None:
+        if len(_TYPES) >= _TYPES_SIZE:
+            _TYPES.clear()
+        types = _TYPES[structure] = _types_of(structure)
+    return types
 
 
 def typed_jit(fun=None, *, static_argnums=()):
@@ -51,6 +63,8 @@ def typed_jit(fun=None, *, static_argnums=()):
         args = [given[i] if i in given else next(rest) for i in range(len(static_values) + len(dynamic))]
         return fun(*args, **kwargs)
 
+    with_types.__name__ = getattr(fun, "__name__", "typed")  # the program's name in profiles and the disk cache
+    with_types.__qualname__ = getattr(fun, "__qualname__", with_types.__name__)
     compiled = jax.jit(with_types, static_argnums=(0, 1))
 
     def split(args):
