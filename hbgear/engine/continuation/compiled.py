@@ -50,6 +50,10 @@ SEGMENT_POINTS = 32
 #: chord's converged point) is taken as it is; a full Newton step is taken if it decreases
 #: ``max |R|``, else a residual-only backtracking gives the next candidate, taken as it is.
 PREDICTOR, NEWTON, BACKTRACKED, CHORD = 0, 1, 2, 3
+#: ``mode`` of the chord loop's first turn: it evaluates ``R`` at the predictor and takes no step
+#: (one residual in the program for the chord loop's start and its steps: each copy of the
+#: residual is compiled on its own).
+CHORD_START = 4
 
 #: ``status`` while the corrector runs (then a NewtonStatus value).
 RUNNING = -1
@@ -257,8 +261,10 @@ def _chord_step(eq: _Equations, chord: _Chord, y, r):
 
 def _chord_turn(eq: _Equations, chord: _Chord, s: _Iterate) -> _Iterate:
     """A chord step from ``s.y``; it must halve ``max |R|``. Converged: a :data:`PREDICTOR` turn
-    evaluates the Jacobian there (for the tangent); no contraction: Newton from the predictor."""
-    cand = _chord_step(eq, chord, s.y, s.r)
+    evaluates the Jacobian there (for the tangent); no contraction: Newton from the predictor.
+    The first turn (:data:`CHORD_START`) only evaluates ``R`` at the predictor."""
+    start = s.mode == CHORD_START
+    cand = jax.lax.cond(start, lambda: s.y, lambda: _chord_step(eq, chord, s.y, s.r))
     r = _residual_of(eq, cand)
     norm = jnp.max(jnp.abs(r))
     it = s.it + 1
@@ -266,7 +272,7 @@ def _chord_turn(eq: _Equations, chord: _Chord, s: _Iterate) -> _Iterate:
     done = contracted & (norm <= eq.tolerance) & _constraint_ok(eq, cand)
     # linear convergence at the observed rate: the next step will be converged, so take it
     # and evaluate (R, R_z, R_p) there at once (the Jacobian is needed for the tangent)
-    last = contracted & ~done & (norm * (norm / s.norm) <= 0.5 * eq.tolerance) & (it < eq.max_iter)
+    last = ~start & contracted & ~done & (norm * (norm / s.norm) <= 0.5 * eq.tolerance) & (it < eq.max_iter)
     go_on = contracted & ~done & ~last & (it < eq.max_iter)
     restart = ~done & ~go_on & ~last  # back to the predictor, Newton
     # a conditional, not a select: the speculative step is a bordered solve (at 8 DOF, H = 32, as
@@ -274,10 +280,12 @@ def _chord_turn(eq: _Equations, chord: _Chord, s: _Iterate) -> _Iterate:
     cand = jax.lax.cond(last, lambda: _chord_step(eq, chord, cand, r), lambda: cand)
     it = jnp.where(last, it + 1, it)
     # leaving the chord mode: its steps are counted in chord_it, the Newton turns in it
-    return s._replace(it=jnp.where(go_on, it, 0).astype(jnp.int32), y=jnp.where(restart, s.y, cand),
-                      r=r, norm=jnp.where(restart | last, jnp.inf, norm), cand=jnp.where(restart, eq.y_pred, cand),
-                      mode=jnp.where(go_on, CHORD, PREDICTOR).astype(jnp.int32),
-                      chord_it=jnp.where(go_on, 0, it).astype(jnp.int32))
+    stepped = s._replace(it=jnp.where(go_on, it, 0).astype(jnp.int32), y=jnp.where(restart, s.y, cand),
+                         r=r, norm=jnp.where(restart | last, jnp.inf, norm), cand=jnp.where(restart, eq.y_pred, cand),
+                         mode=jnp.where(go_on, CHORD, PREDICTOR).astype(jnp.int32),
+                         chord_it=jnp.where(go_on, 0, it).astype(jnp.int32))
+    started = s._replace(r=r, norm=norm, mode=jnp.full_like(s.mode, CHORD))
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(start, a, b), started, stepped)
 
 
 # ------------------------------------------------------------------------------ Newton turn
@@ -351,17 +359,16 @@ def _correct(eq: _Equations, previous, factor: _Factor, keep: _Factor):
     d = eq.row - factor.previous
     chord = _Chord(factor.lu, factor.perm, factor.v, d, 1.0 + d @ factor.v)
     start_chord = factor.usable & (eq.max_iter > 0)
-    r0 = jax.lax.cond(start_chord, lambda: _residual_of(eq, eq.y_pred), lambda: jnp.zeros(size))
-    norm0 = jnp.where(start_chord, jnp.max(jnp.abs(r0)), jnp.inf)
     if _jacobian_is_structured(eq.residual_and_jacobians, size, eq.args):
         jac0 = _zeros_like_tree(jax.eval_shape(lambda y: _evaluate(eq, y)[1], eq.y_pred))
     else:
         jac0 = jnp.zeros((size, size + 1))
-    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=r0, jac=None, norm=norm0,
-                    cand=eq.y_pred, step=jnp.zeros(size + 1), mode=jnp.where(start_chord, CHORD, PREDICTOR).astype(i32),
+    init = _Iterate(it=jnp.asarray(0, i32), y=eq.y_pred, r=jnp.zeros(size), jac=None, norm=jnp.asarray(jnp.inf),
+                    cand=eq.y_pred, step=jnp.zeros(size + 1),
+                    mode=jnp.where(start_chord, CHORD_START, PREDICTOR).astype(i32),
                     status=jnp.asarray(RUNNING, i32), chord_it=jnp.asarray(0, i32))
     # (`it >= 0` always holds: see _running); a chord turn leaves `status` RUNNING
-    s = jax.lax.while_loop(lambda s: _running(s.mode == CHORD, s.it), lambda s: _chord_turn(eq, chord, s), init)
+    s = jax.lax.while_loop(lambda s: _running(s.mode >= CHORD, s.it), lambda s: _chord_turn(eq, chord, s), init)
     s = jax.lax.while_loop(lambda s: _running(s.status < 0, s.it), lambda s: _newton_turn(eq, s),
                            s._replace(jac=jac0))
 
