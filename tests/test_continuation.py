@@ -496,3 +496,33 @@ def test_formulation_b_on_the_spring_does_not_crawl():
     for i in (len(response) // 3, len(response) - 2):
         reference = solve_periodic(model, float(response.parameter[i]), harmonics=32, samples=1024, tolerance=1e-12)
         assert np.max(np.abs(response.z[i] - reference.z)) <= 1e-7 * np.max(np.abs(reference.z))
+
+
+def test_solve_at_parameter_reuses_the_curves_compiled_corrector():
+    """A fixed-parameter solve by the corrector of a compiled continuation of the same functions
+    (as the period-doubling search does): the solution of the engine's Newton on the same
+    equations (1e-10), and no program compiled for it -- neither a new trace of the corrector
+    nor the separately compiled residual functions."""
+    from hbgear.engine.continuation import solve_at_parameter
+    from hbgear.engine.continuation.compiled import _cached_jit_corrector
+    from hbgear.engine.hb import residual_functions
+    from hbgear.engine.newton import newton
+
+    hb = HarmonicBalance(1, 5, 1, 32)
+    rj, r, fixed = residual_functions(hb, DUFFING)
+    branch = continuation(rj, r, np.zeros(hb.size), 0.5, 2.0, PseudoArclength(jit_step=True, chord=True),
+                          tolerance=1e-11, max_points=2000, args=fixed)
+    assert branch.status == Status.SUCCESS, branch.message
+    advance = _cached_jit_corrector(rj, r, hb.size)[0]
+    programs = (advance._cache_size(), HarmonicBalance._residual_jit._cache_size(),
+                HarmonicBalance._residual_and_jacobians_jit._cache_size())
+    k = len(branch) // 2
+    p = 0.5 * (branch.p[k] + branch.p[k + 1])
+    ours = solve_at_parameter(rj, r, branch.z[k], p, args=fixed, tolerance=1e-11)
+    assert (advance._cache_size(), HarmonicBalance._residual_jit._cache_size(),
+            HarmonicBalance._residual_and_jacobians_jit._cache_size()) == programs
+    reference = newton(lambda z: hb.residual_and_jacobians(jnp.asarray(z), p, DUFFING)[:2],
+                       lambda z: hb.residual(jnp.asarray(z), p, DUFFING), branch.z[k], tolerance=1e-12)
+    assert ours.converged and reference.converged
+    assert ours.residual_norm <= 1e-11
+    np.testing.assert_allclose(ours.z, reference.z, rtol=0, atol=1e-10 * np.max(np.abs(reference.z)))

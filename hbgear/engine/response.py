@@ -22,10 +22,10 @@ import numpy as np
 from ..errors import ConvergenceError
 from . import fourier
 from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doublings
-from .continuation import Branch, Status, continuation, sweep_method
+from .continuation import Branch, Status, continuation, solve_at_parameter, sweep_method
 from .floquet import hill_multipliers, period_doubling
 from .hb import HarmonicBalance, residual_functions
-from .newton import newton
+from .newton import NewtonResult, newton
 from .stability import BranchStability, branch_stability, unstable_zones
 from .system import check_system
 
@@ -283,12 +283,8 @@ class FrequencyResponse:
 def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, step, progress, start):
     """The branch from `p0` to `p1`: Newton from `z0` in the compiled corrector; on a failed start
     the `start` callable (``p -> z``, e.g. a staged solve) gives a converged start point."""
-    rj, r, fixed = residual_functions(hb, system)
+    rj, r, fixed, sizes = _continuation_functions(hb, system, p0)
     method = sweep_method(p0, p1, step)
-    sizes = arclength_sizes(hb, system, p0)
-    if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
-        rj, r = _sized_functions_of(hb)
-        fixed = (*fixed, sizes)
 
     def run(z, iterations):
         z = np.asarray(z, dtype=float) if sizes is None else np.asarray(z, dtype=float) / sizes
@@ -303,6 +299,31 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     if start is None:
         return run(np.zeros(hb.size), max_iterations)
     return run(start(p0), 10)
+
+
+def _continuation_functions(hb: HarmonicBalance, system, p):
+    """``(residual_and_jacobians, residual, args, sizes)`` that :func:`_follow` continues: the
+    residual functions of `hb`, or with :func:`arclength_sizes` at `p` those in the unknowns
+    ``y = z / sizes`` (`sizes` the last argument; ``None`` when there are none)."""
+    rj, r, fixed = residual_functions(hb, system)
+    sizes = arclength_sizes(hb, system, p)
+    if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
+        rj, r = _sized_functions_of(hb)
+        fixed = (*fixed, sizes)
+    return rj, r, fixed, sizes
+
+
+def corrector_solve(hb: HarmonicBalance, system, p: float, z0, *, tolerance: float = 1e-9,
+                    max_iterations: int = 50, sizes_at=None) -> NewtonResult:
+    """The solution at `p` by the compiled corrector of a curve of `system` (the program its
+    continuation compiled: :func:`~hbgear.engine.continuation.solve_at_parameter`), in the unknowns
+    of that curve (:func:`arclength_sizes` at `sizes_at`, default `p`: pass the curve's start to
+    share its program); ``z`` of the result in `hb`'s unknowns."""
+    rj, r, fixed, sizes = _continuation_functions(hb, system, p if sizes_at is None else sizes_at)
+    z0 = np.asarray(z0, dtype=float)
+    result = solve_at_parameter(rj, r, z0 if sizes is None else z0 / sizes, float(p), args=fixed, tolerance=tolerance,
+                                max_iterations=max_iterations)
+    return result if sizes is None else result._replace(z=np.asarray(result.z) * sizes)
 
 
 def arclength_sizes(hb: HarmonicBalance, system, p) -> np.ndarray | None:
@@ -353,8 +374,9 @@ def _locate_and_follow(system, hb, branch, multipliers, *, follow, tolerance, ma
                        p_range, progress, harmonics2=None, samples2=None):
     """The period-doubling records and the followed ``nu = 2`` branches of a ``nu = 1`` branch."""
 
-    def solve_nu1(p, z0):
-        result = newton_solve(hb, system, float(p), z0, tolerance=tolerance, max_iterations=max_iterations)
+    def solve_nu1(p, z0):  # the curve's own compiled corrector: nothing more to compile
+        result = corrector_solve(hb, system, float(p), z0, tolerance=tolerance, max_iterations=max_iterations,
+                                 sizes_at=branch.p[0])
         if not result.converged:
             raise ConvergenceError(f"nu = 1 solve at p = {p:.9g} for the period-doubling search: residual "
                                    f"{result.residual_norm:.3e}")

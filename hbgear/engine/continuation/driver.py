@@ -14,7 +14,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..condensed import as_matrix
-from ..newton import newton
+from ..newton import NewtonResult, NewtonStatus, newton
 from .branch import MESSAGES, Branch, PointKind, Status
 from .compiled import _JIT_CACHE, SegmentControls, _cached_jit_corrector, _Compiled
 from .corrector import _Failure, _Point, _python_corrector
@@ -23,7 +23,7 @@ from .options import PseudoArclength
 from .progress import _advance_bar, _progress_bar
 from .steps import _angle_deg, _grown_step, _limited_step
 
-__all__ = ["continuation"]
+__all__ = ["continuation", "solve_at_parameter"]
 
 _PACKAGE = str(Path(__file__).resolve().parent)
 
@@ -73,6 +73,52 @@ class _Correctors:
                       RuntimeWarning, stacklevel=_caller_stacklevel())
         self.compiled = None
         _JIT_CACHE.pop(self._key, None)
+
+
+def _compiled_fixed_point(correct: _Correctors, z0, p, scale, seed, max_iterations, tolerance, residual):
+    """One compiled corrector run at fixed ``p`` (the bordered row ``e_p``) from ``(z0, p)``, its
+    tangent oriented along `seed`: a :class:`_Point`, or ``None`` when there is no compiled
+    corrector or it did not converge."""
+    if correct.compiled is None:
+        return None
+    y_guess, fixed_p = np.append(z0, p / scale), np.abs(seed)
+    try:
+        point = correct.compiled(y_guess, fixed_p, p / scale, seed, max_iterations, tolerance)
+    except Exception:  # noqa: BLE001 -- e.g. a closure that fills a cache on its first call,
+        residual(z0, float(p))  # which must be eager: call it once, then trace again
+        point = correct(y_guess, fixed_p, p / scale, max_iterations, seed)  # or fall back
+    return point if isinstance(point, _Point) else None
+
+
+def solve_at_parameter(residual_and_jacobians, residual, z0, p: float, *, args=(), tolerance: float = 1e-9,
+                       max_iterations: int = 50) -> NewtonResult:
+    """``R(z; p) = 0`` at fixed `p` by the corrector a :func:`continuation` of the same functions
+    runs (``jit_step``): the same compiled program (no compilation of its own once a continuation
+    of these functions and argument shapes has run), the bordered row fixing ``p``; if that
+    corrector does not converge or cannot be compiled, the engine's Newton
+    (:func:`~hbgear.engine.newton.newton`), which compiles the residual functions on their own.
+
+    **Returns:** a :class:`~hbgear.engine.newton.NewtonResult` (no Jacobian).
+    """
+    z0, args = np.asarray(z0, dtype=float), tuple(args)
+    scale = abs(float(p)) or 1.0
+    functions = (residual_and_jacobians, residual)
+    if args:
+        def residual_and_jacobians(z, p, _f=residual_and_jacobians):
+            return _f(z, p, *args)
+
+        def residual(z, p, _f=residual):
+            return _f(z, p, *args)
+
+    correct = _Correctors(functions, (residual_and_jacobians, residual), scale, z0.size,
+                          PseudoArclength(jit_step=True), None, args, tolerance)
+    seed = np.zeros(z0.size + 1)
+    seed[-1] = 1.0
+    point = _compiled_fixed_point(correct, z0, p, scale, seed, max_iterations, tolerance, residual)
+    if point is not None:
+        return NewtonResult(point.y[:-1], NewtonStatus.CONVERGED, point.iterations, point.r_norm)
+    return newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p))), lambda z: residual(z, float(p)), z0,
+                  tolerance=tolerance, max_iterations=max_iterations)
 
 
 class _Record:
@@ -159,15 +205,7 @@ class _Run:
         seed = np.zeros(z0.size + 1)
         seed[-1] = self.direction
         fixed_p = np.abs(seed)
-        first = None
-        if self.correct.compiled is not None:
-            y_guess = np.append(z0, p0 / scale)
-            try:
-                first = self.correct.compiled(y_guess, fixed_p, p0 / scale, seed, start_iterations, self.tolerance)
-            except Exception:  # noqa: BLE001 -- e.g. a closure that fills a cache on its first call,
-                residual(z0, float(p0))  # which must be eager: call it once, then trace again
-                first = self.correct(y_guess, fixed_p, p0 / scale, start_iterations, seed)  # or fall back
-            first = first if isinstance(first, _Point) else None
+        first = _compiled_fixed_point(self.correct, z0, p0, scale, seed, start_iterations, self.tolerance, residual)
         if first is None:
             start = newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p0))),
                            lambda z: residual(z, float(p0)), z0,
