@@ -19,7 +19,6 @@ from functools import lru_cache
 from typing import Any, NamedTuple
 
 import numpy as np
-import scipy.fft
 
 __all__ = ["mesh_period_rule", "fourier_coefficients", "LatticeRule", "lattice_rule", "lattice_coefficients",
            "lattice_synthesis"]
@@ -264,6 +263,8 @@ def _chirp_factors(theta, length: int, out_len: int, xp=np):
     ``y = post * ((x pre) * b)``, ``b_k = exp(i theta k^2 / 2)``, done by FFTs of a length
     ``F >= L + out_len - 1``): ``pre = exp(-i theta l^2/2)`` ``(P, L)``, `kernel` the FFT of
     ``b`` ``(P, F)``, ``post = exp(-i theta m^2/2)`` ``(P, out_len)``."""
+    import scipy.fft  # here, not at import: the curves of few harmonics never need it (0.1 s of every run)
+
     size = scipy.fft.next_fast_len(max(1, length + out_len - 1))
     theta = xp.asarray(theta)[:, None]
     l, m = np.arange(length), np.arange(out_len)

@@ -44,7 +44,6 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.fft
 
 from . import fourier
 from .krylov import KrylovInfo, gmres
@@ -99,6 +98,8 @@ class Linearization(NamedTuple):
 
 def product_samples(harmonics: int) -> int:
     """``M``: the smallest FFT-friendly length above ``4H`` (exact products of degree ``2H`` by ``H``)."""
+    import scipy.fft  # here, not at import: the curves of few harmonics never need it (0.1 s of every run)
+
     return scipy.fft.next_fast_len(4 * harmonics + 1, real=True)
 
 
