@@ -103,20 +103,26 @@ def solve_at_parameter(residual_and_jacobians, residual, z0, p: float, *, args=(
     z0, args = np.asarray(z0, dtype=float), tuple(args)
     scale = abs(float(p)) or 1.0
     functions = (residual_and_jacobians, residual)
-    if args:
-        def residual_and_jacobians(z, p, _f=residual_and_jacobians):
-            return _f(z, p, *args)
-
-        def residual(z, p, _f=residual):
-            return _f(z, p, *args)
-
-    correct = _Correctors(functions, (residual_and_jacobians, residual), scale, z0.size,
-                          PseudoArclength(jit_step=True), None, args, tolerance)
+    bound = _bound(functions, args)
+    correct = _Correctors(functions, bound, scale, z0.size, PseudoArclength(jit_step=True), None, args, tolerance)
     seed = np.zeros(z0.size + 1)
     seed[-1] = 1.0
-    point = _compiled_fixed_point(correct, z0, p, scale, seed, max_iterations, tolerance, residual)
+    point = _compiled_fixed_point(correct, z0, p, scale, seed, max_iterations, tolerance, bound[1])
     if point is not None:
         return NewtonResult(point.y[:-1], NewtonStatus.CONVERGED, point.iterations, point.r_norm)
+    return _engine_newton(*bound, z0, p, tolerance, max_iterations)
+
+
+def _bound(functions, args):
+    """``(residual_and_jacobians, residual)`` of ``(z, p)`` with the extra `args` bound."""
+    if not args:
+        return functions
+    residual_and_jacobians, residual = functions
+    return (lambda z, p: residual_and_jacobians(z, p, *args)), (lambda z, p: residual(z, p, *args))
+
+
+def _engine_newton(residual_and_jacobians, residual, z0, p, tolerance, max_iterations):
+    """The engine's Newton (:func:`~hbgear.engine.newton.newton`) at fixed `p` on the bound functions."""
     return newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p))), lambda z: residual(z, float(p)), z0,
                   tolerance=tolerance, max_iterations=max_iterations)
 
@@ -207,9 +213,7 @@ class _Run:
         fixed_p = np.abs(seed)
         first = _compiled_fixed_point(self.correct, z0, p0, scale, seed, start_iterations, self.tolerance, residual)
         if first is None:
-            start = newton(lambda z: _dense_pair(residual_and_jacobians(z, float(p0))),
-                           lambda z: residual(z, float(p0)), z0,
-                           tolerance=self.tolerance, max_iterations=start_iterations)
+            start = _engine_newton(residual_and_jacobians, residual, z0, p0, self.tolerance, start_iterations)
             if not start.converged:
                 return _Stop(Status.START_FAILED,
                              f"Newton at p = {p0:.9g} reached max|R| = {start.residual_norm:.3e} > tolerance "
@@ -431,13 +435,7 @@ def continuation(
     z0 = np.asarray(z0, dtype=float)
     args = tuple(args)
     functions = (residual_and_jacobians, residual)  # traced by the compiled corrector with `args`
-    if args:
-        def residual_and_jacobians(z, p, _f=residual_and_jacobians):
-            return _f(z, p, *args)
-
-        def residual(z, p, _f=residual):
-            return _f(z, p, *args)
-
+    residual_and_jacobians, residual = _bound(functions, args)
     run = _Run(functions, (residual_and_jacobians, residual), args, _Record(z0.size, scale, callback), m, p0, p_end,
                scale, tolerance, max_points)
     clock_start = time.perf_counter()
