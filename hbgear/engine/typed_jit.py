@@ -22,6 +22,8 @@ import functools
 
 import jax
 
+from .caching import BoundedCache
+
 __all__ = ["node_types", "typed_jit"]
 
 
@@ -35,19 +37,13 @@ def _types_of(treedef) -> tuple:
 
 #: node_types per tree structure: a dict compares the full hashes first (they differ between
 #: classes) and only then the broken equality, so a structure finds its own entry.
-_TYPES: dict = {}
-_TYPES_SIZE = 256
+_TYPES = BoundedCache(256)
 
 
 def node_types(tree) -> tuple:
     """The class of every node of `tree`'s structure, depth first (leaves left out)."""
     structure = jax.tree_util.tree_structure(tree)
-    types = _TYPES.get(structure)
-    if types is None:
-        if len(_TYPES) >= _TYPES_SIZE:
-            _TYPES.clear()
-        types = _TYPES[structure] = _types_of(structure)
-    return types
+    return _TYPES.get_or_make(structure, lambda: _types_of(structure))
 
 
 def typed_jit(fun=None, *, static_argnums=()):
