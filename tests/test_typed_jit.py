@@ -1,18 +1,17 @@
-"""Compiled programs told apart by class (hbgear.engine.typed_jit): jax >= 0.7 compares the tree
+"""Compiled programs told apart by class (hbgear.engine.typed_jit): jax 0.10 compares the tree
 structures of two ``register_dataclass`` classes with the same leaves as equal, and ``jax.jit``'s
 cache can then hand one class the program traced for the other."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, make_dataclass
-from typing import ClassVar
+from dataclasses import make_dataclass
 
 import jax.numpy as jnp
 import numpy as np
 from jax.tree_util import register_dataclass
 
 from hbgear.engine.hb import HarmonicBalance
-from hbgear.engine.system import PeriodicSystem
+from hbgear.engine.system import Duffing
 from hbgear.engine.typed_jit import node_types, typed_jit
 
 
@@ -47,51 +46,15 @@ def test_node_types_names_every_node_class_and_static_arguments_are_not_walked()
     assert float(bound(3.0, inner(x=5.0))) == 15.0
 
 
-@dataclass(frozen=True)
-class _Oscillator(PeriodicSystem):
-    r"""``x'' + c x' + k x + g x^3 = cos(w t)`` with ``k`` a class constant: classes that differ
-    only there have the same tree structure."""
-
-    ndof: ClassVar[int] = 1
-    is_linear: ClassVar[bool] = False
-    stiffness: ClassVar[float] = 1.0
-
-    def mass_matrix(self, p, xp=np):
-        return xp.ones((1, 1))
-
-    def excitation_frequency(self, p):
-        return p
-
-    def force(self, s, q, qd, p, part, extra, xp=np):
-        linear = xp.cos(2 * np.pi * s) - self.stiffness * q[0] - self.damping * qd[0]
-        cubic = -self.cubic * q[0] ** 3
-        return xp.stack([linear if part == "linear" else cubic if part == "nonlinear" else linear + cubic])
-
-
-@register_dataclass
-@dataclass(frozen=True)
-class _Reference(_Oscillator):
-    """The same equations with ``k`` a leaf: one class, one program, the value an argument."""
-
-    damping: float = 0.1
-    cubic: float = 0.5
-    k: float = 1.0
-
-    @property
-    def stiffness(self):
-        return self.k
-
-
 def test_harmonic_balance_residuals_follow_the_class():
-    """Oscillator classes with equal leaves and their own stiffness (a class constant): the
-    residual of each equals that of one reference class carrying the stiffness as a leaf."""
+    """Duffing subclasses with Duffing's leaves whose only difference is a class constant, the
+    excitation frequency ``w = f_i p``: the residual of each at ``p`` equals Duffing's at ``f_i p``."""
     hb = HarmonicBalance(1, 2, 1, 8)
     z = jnp.asarray(np.random.default_rng(3).normal(size=hb.size) * 0.3)
-    classes = _classes(12, fields=(("damping", float, 0.1), ("cubic", float, 0.5)), base=(_Oscillator,))
-    for cls in classes:
-        cls.stiffness = 1.0 + 0.1 * cls.factor
-        ours, reference = cls(), _Reference(k=cls.stiffness)
-        np.testing.assert_allclose(np.asarray(hb.residual(z, 0.9, ours)), np.asarray(hb.residual(z, 0.9, reference)),
+    for cls in _classes(12, fields=(), base=(Duffing,)):
+        cls.excitation_frequency = lambda self, p: (1.0 + 0.1 * type(self).factor) * p
+        np.testing.assert_allclose(np.asarray(hb.residual(z, 0.9, cls())),
+                                   np.asarray(hb.residual(z, 0.9 * (1.0 + 0.1 * cls.factor), Duffing())),
                                    rtol=0, atol=1e-13)
 
 
@@ -100,9 +63,11 @@ def test_compiled_entry_points_that_take_a_system_are_typed():
     through typed_jit (the test above can only catch a collision by chance)."""
     from hbgear.engine import events, hill, monodromy, structured
     from hbgear.engine.continuation.compiled import _cached_jit_corrector
+    from hbgear.engine.hb import residual_functions
 
     hb = HarmonicBalance(1, 2, 1, 8)
-    entry_points = [hb._residual_jit, hb._residual_and_jacobian_jit, hb._residual_and_jacobians_jit,
+    corrector = _cached_jit_corrector(*residual_functions(hb, Duffing())[:2], hb.size)[0]
+    entry_points = [corrector, hb._residual_jit, hb._residual_and_jacobian_jit, hb._residual_and_jacobians_jit,
                     hb._residual_and_port_jacobians_jit, hb._hill_matrices_jit, structured._linearize_jit,
                     events.crossings_compiled, monodromy._variational_rhs(False), monodromy._variational_rhs(True),
                     hill._pencil_function(hb, False), hill._pencil_function(hb, True)]
