@@ -123,6 +123,8 @@ def test_engine_verdicts_leave_out_the_neutral_pair(spring_sweep):
     system = GearSystem(model)
     engine = np.array([floquet.stable_verdict(system, w, m) for w, m in zip(omegas, mult)])
     np.testing.assert_array_equal(engine, stable_verdicts(model, omegas, mult))
+    np.testing.assert_array_equal(floquet.stable_verdicts(system, omegas, mult), engine)  # rows at once
+    assert engine.any() and not engine.all()
     reaction = gear("friction.model='LTV'", "boundary.output='reaction'")
     from_spring = unstable_zones(system, omegas[::10])
     from_reaction = unstable_zones(GearSystem(reaction), omegas[::10])

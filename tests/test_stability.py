@@ -332,3 +332,41 @@ def test_cli_writes_outputs_and_missing_dask_is_bad_input(tmp_path, monkeypatch,
     monkeypatch.setitem(sys.modules, "dask.distributed", None)
     assert cli.main(args[:4] + ["--scheduler", "tcp://127.0.0.1:1"]) == 2
     assert "install hbgear[distributed]" in capsys.readouterr().err
+
+
+def test_stable_verdicts_rows_follow_the_single_point_rule():
+    """floquet.stable_verdicts (rows at once) against the rule written out point by point: drop the
+    nearest multiplier within TRIVIAL_TOL of each known neutral one, then stable iff what is left is
+    non-empty, finite and inside 1 + 1e-9."""
+
+    class Neutral:
+        def neutral_multipliers(self, p, nu=1):
+            p = np.asarray(p, dtype=float)
+            return np.stack([np.exp(1j * p), np.exp(-1j * p)], axis=-1)
+
+    rng = np.random.default_rng(7)
+    ps = rng.uniform(0.1, 3.0, 400)
+    mult = (rng.uniform(0.5, 1.1, (400, 4)) * np.exp(1j * rng.uniform(-np.pi, np.pi, (400, 4))))
+    hit = rng.random(400) < 0.5
+    mult[hit, 1] = np.exp(1j * ps[hit]) * (1 + 1e-9)  # a neutral pair, one slightly off
+    mult[hit, 3] = np.exp(-1j * ps[hit])
+    mult[::37, 2] = np.nan
+    mult[5] = [np.exp(1j * ps[5]), np.exp(-1j * ps[5]), np.exp(1j * ps[5]), 0.2]  # one neutral copy too many
+    mult[6, :2] = [np.exp(1j * ps[6]), np.exp(-1j * ps[6])]
+
+    def by_hand(p, m):
+        left = list(m)
+        for target in (np.exp(1j * p), np.exp(-1j * p)):
+            d = [abs(x - target) for x in left]
+            j = int(np.argmin(d))
+            if d[j] <= floquet.TRIVIAL_TOL:
+                left.pop(j)
+        left = np.abs(np.asarray(left))
+        return bool(left.size and np.all(np.isfinite(left)) and left.max() <= 1.0 + 1e-9)
+
+    want = [by_hand(p, m) for p, m in zip(ps, mult)]
+    assert 50 < sum(want) < 350
+    np.testing.assert_array_equal(floquet.stable_verdicts(Neutral(), ps, mult), want)
+    assert [floquet.stable_verdict(Neutral(), p, m) for p, m in zip(ps[:40], mult[:40])] == want[:40]
+    only_neutral = np.array([[np.exp(1j * 0.3), np.exp(-1j * 0.3)]])
+    assert not floquet.stable_verdicts(Neutral(), [0.3], only_neutral)[0]  # nothing left: no verdict

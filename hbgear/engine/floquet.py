@@ -42,6 +42,7 @@ __all__ = [
     "period_doubling",
     "split_neutral",
     "stable_verdict",
+    "stable_verdicts",
 ]
 
 #: Multipliers within this distance of 1 (exponents within ``TRIVIAL_TOL/(2 pi)`` of 0, in
@@ -117,8 +118,22 @@ def stable_verdict(system, p, multipliers, nu: int = 1, tol: float = 1e-9) -> bo
     """The stability of a solution of `system` at `p`: :func:`is_stable` of its multipliers (trivial
     ones already dropped) less the system's known neutral ones (:func:`split_neutral` with the
     system's ``neutral_multipliers(p, nu)``, within :data:`TRIVIAL_TOL`)."""
-    others, _ = split_neutral(multipliers, system.neutral_multipliers(p, nu), TRIVIAL_TOL)
-    return is_stable(others, tol)
+    return bool(stable_verdicts(system, np.asarray([p], dtype=float), np.asarray(multipliers)[None, :], nu, tol)[0])
+
+
+def stable_verdicts(system, ps, multipliers, nu: int = 1, tol: float = 1e-9) -> np.ndarray:
+    """:func:`stable_verdict` of many solutions at once: row ``i`` of `multipliers` ``(m, k)`` at
+    ``ps[i]``. A row is stable iff all its multipliers are finite, at least one is not a known
+    neutral one, and those have ``|mu| <= 1 + tol`` (:func:`is_stable` of what
+    :func:`split_neutral` leaves: an empty set has no verdict, so it is not stable)."""
+    m = np.asarray(multipliers)
+    if m.shape[-1] == 0:
+        return np.zeros(m.shape[:-1], dtype=bool)
+    mask = neutral_mask(m, system.neutral_multipliers(np.asarray(ps, dtype=float), nu), TRIVIAL_TOL)
+    finite = np.all(np.isfinite(m), axis=-1)
+    with np.errstate(invalid="ignore"):
+        largest = np.max(np.where(mask, 0.0, np.abs(m)), axis=-1)
+    return finite & np.any(~mask, axis=-1) & (largest <= 1.0 + tol)
 
 
 def period_doubling(multipliers, tol: float = 1e-9) -> bool:

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .floquet import TRIVIAL_TOL, hill_exponents_along, hill_follower, hill_multipliers, neutral_mask, stable_verdict
+from .floquet import hill_exponents_along, hill_follower, hill_multipliers, stable_verdicts
 
 __all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
            "ZONE_SCAN_SUBDIVISIONS"]
@@ -142,21 +142,11 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
         warning = ((fallback + "; ") if fallback else "") + (
             f"Floquet multipliers failed at {len(failures)} point(s), NaN there; first: {failures[0]}")
     max_abs = np.array([np.nan if m is None else (float(np.max(np.abs(m))) if m.size else 0.0) for m in out])
-    stable = np.array([np.nan if m is None else float(stable_verdict(system, float(p), m, hb.nu))
-                       for p, m in zip(ps, out)])
+    stable = np.full(n, np.nan)
+    for size in {m.size for m in out if m is not None}:  # one vectorised verdict per multiplier count
+        rows = [i for i, m in enumerate(out) if m is not None and m.size == size]
+        stable[rows] = stable_verdicts(system, ps[rows], np.stack([out[i] for i in rows]), hb.nu)
     return BranchStability(out, max_abs, stable, method, warning)
-
-
-def _stable_rows(system, ps, mult: np.ndarray, nu: int = 1) -> np.ndarray:
-    """:func:`~hbgear.engine.floquet.stable_verdict` of every row of `mult` ``(m, k)`` at the
-    parameters `ps` ``(m,)``, vectorised (the system's known neutral multipliers left out)."""
-    mult = np.asarray(mult)
-    if mult.shape[-1] == 0:
-        return np.zeros(len(mult), dtype=bool)
-    mask = neutral_mask(mult, system.neutral_multipliers(np.asarray(ps, dtype=float), nu), TRIVIAL_TOL)
-    finite = np.all(np.isfinite(mult), axis=-1)
-    with np.errstate(invalid="ignore"):
-        return finite & (np.max(np.where(mask, 0.0, np.abs(mult)), axis=-1) <= 1.0 + 1e-9)
 
 
 def leaves_through(multiplier) -> str:
@@ -182,7 +172,7 @@ def unstable_zones(system, ps, subdivisions: int = ZONE_SCAN_SUBDIVISIONS) -> li
     frac = np.arange(subdivisions) / subdivisions
     grid = np.concatenate([(p[:-1, None] + np.diff(p)[:, None] * frac).ravel(), p[-1:]])
     mult = np.concatenate([np.asarray(multipliers_linear(system, grid[lo:lo + 512])) for lo in range(0, len(grid), 512)])
-    unstable = ~_stable_rows(system, grid, mult)
+    unstable = ~stable_verdicts(system, grid, mult)
     zones = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], unstable.astype(int), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):
