@@ -283,7 +283,7 @@ class HarmonicBalance:
         """``(nodes, kernel_cos, kernel_sin)`` of the mesh-period rule, weights folded in (device arrays)."""
         s, w = mesh_period_rule(np.asarray(_breakpoint_key(system, p)), self.max_mesh_order)
         phase = 2 * np.pi * np.outer(np.arange(self.max_mesh_order + 1), s)
-        return tuple(jnp.asarray(a) for a in (s, np.cos(phase) * w, np.sin(phase) * w))
+        return jax.device_put((s, np.cos(phase) * w, np.sin(phase) * w))  # no compiled copy per array
 
     def _lattice(self, system, p):
         """The :class:`~hbgear.engine.quadrature.LatticeRule` of :meth:`_rule`'s nodes, in numpy and

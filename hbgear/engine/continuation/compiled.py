@@ -161,9 +161,11 @@ class _Chord(NamedTuple):
 
 
 def _no_factor(size, previous, xp=jnp) -> _Factor:
-    """An unusable chord factorisation (zeros), with `previous`."""
-    return _Factor(xp.zeros((size + 1, size + 1)), xp.zeros(size + 1, np.int32), xp.zeros(size + 1), previous,
-                   xp.asarray(False))
+    """An unusable chord factorisation (zeros), with `previous` (with ``xp = jnp``: numpy zeros put
+    on the device, not ``jnp.zeros``, which compiles a program of its own per shape)."""
+    put = jax.device_put if xp is jnp else (lambda a: a)
+    return _Factor(put(np.zeros((size + 1, size + 1))), put(np.zeros(size + 1, np.int32)), put(np.zeros(size + 1)),
+                   previous, put(np.asarray(False)))
 
 
 # ------------------------------------------------------------------------------ linear algebra
@@ -199,7 +201,7 @@ def _dense(jac):
 
 
 def _zeros_like_tree(shapes):
-    return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    return jax.tree_util.tree_map(lambda s: jax.device_put(np.zeros(s.shape, s.dtype)), shapes)
 
 
 def _jacobian_is_structured(residual_and_jacobians, size, args) -> bool:
@@ -461,13 +463,14 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                 lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
                 return lu
 
-            return _zeros_like_tree(jax.eval_shape(factor, tuple(args), jnp.asarray(previous, dtype=float)))
+            return _zeros_like_tree(jax.eval_shape(factor, tuple(args), jax.ShapeDtypeStruct(np.shape(previous), np.float64)))
 
         key = _signature(args)
         lu = zeros() if key is None else structured_lu.get_or_make(key, zeros)
         if lu is None:
             return _no_factor(size, previous, xp)
-        return _Factor(lu, jnp.zeros(1, np.int32), jnp.zeros(size + 1), previous, jnp.asarray(False))
+        put = jax.device_put
+        return _Factor(lu, put(np.zeros(1, np.int32)), put(np.zeros(size + 1)), previous, put(np.asarray(False)))
 
     @typed_jit
     def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
@@ -520,7 +523,7 @@ class _Compiled:
             return self.last
         # "no factorisation": device-resident zeros made once, only `previous` changes
         if self.empty is None:
-            self.empty = self.no_factor(jnp.asarray(previous, dtype=float), args=self.args)
+            self.empty = self.no_factor(jax.device_put(np.asarray(previous, dtype=float)), args=self.args)
         return self.empty._replace(previous=np.asarray(previous, dtype=float))
 
     def _run(self, y_pred, row, target, previous, max_iter, tolerance, y0, t0, ds0, budget):
