@@ -463,7 +463,8 @@ def _jit_corrector(residual_and_jacobians, residual, size):
                 lu, _ = _factor_bordered(_evaluate(eq, prev)[1], prev)
                 return lu
 
-            return _zeros_like_tree(jax.eval_shape(factor, tuple(args), jax.ShapeDtypeStruct(np.shape(previous), np.float64)))
+            previous_shape = jax.ShapeDtypeStruct(np.shape(previous), np.float64)
+            return _zeros_like_tree(jax.eval_shape(factor, tuple(args), previous_shape))
 
         key = _signature(args)
         lu = zeros() if key is None else structured_lu.get_or_make(key, zeros)
