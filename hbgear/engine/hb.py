@@ -321,7 +321,8 @@ class HarmonicBalance:
         def make():
             # in numpy: a one-off computation of a few ms, which compiled for ~2 s in XLA
             rule_np = tuple(np.asarray(a) for a in rule)
-            blocks = tuple(jnp.asarray(b) for b in self._blocks(system, p, rule_np))
+            blocks = tuple(np.asarray(b) for b in self._blocks(system, p, rule_np))
+            blocks = jax.device_put(blocks)  # not jnp.asarray: no compiled copy per array
             return FrozenOperator(*blocks, self._forcing_pieces(system, rule_np))
 
         return _FROZEN.get_or_make(key, make)

@@ -151,7 +151,7 @@ def hill_pencils(hb, zs, ps, system, prepared=None):
     ``A1 = w D1``, ``A2 = w^2 D2``, scaled), ``k`` points each, in order, and ``(m,)`` the base
     frequency of each point.
     """
-    import jax.numpy as jnp
+    import jax  # device_put, not jnp.asarray: that compiles a small program per shape
 
     zs = np.atleast_2d(np.asarray(zs, dtype=float))
     ps = np.atleast_1d(np.asarray(ps, dtype=float))
@@ -159,12 +159,12 @@ def hill_pencils(hb, zs, ps, system, prepared=None):
     w = np.array([float(hb.base_frequency(system, p)) for p in ps])
     prepared = hb.prepare(system) if prepared is None else prepared
     if m == 1:
-        return [np.asarray(_pencil_function(hb, False)(jnp.asarray(zs[0]), ps[0], system, prepared))[None]], w
+        return [np.asarray(_pencil_function(hb, False)(jax.device_put(zs[0]), ps[0], system, prepared))[None]], w
     fn, chunk = _pencil_function(hb, True), _pencil_chunk(hb.size)
     out = []
     for lo in range(0, m, chunk):
         idx = np.minimum(np.arange(lo, lo + chunk), m - 1)
-        out.append(np.asarray(fn(jnp.asarray(zs[idx]), jnp.asarray(ps[idx]), system, prepared))[:min(chunk, m - lo)])
+        out.append(np.asarray(fn(*jax.device_put((zs[idx], ps[idx])), system, prepared))[:min(chunk, m - lo)])
     return out, w
 
 
