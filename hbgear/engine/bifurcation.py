@@ -23,9 +23,9 @@ from __future__ import annotations
 import math
 from typing import Callable, NamedTuple
 
-import jax.numpy as jnp
 import numpy as np
 
+from .arrays import device_array
 from .continuation import PseudoArclength, Status, continuation, illinois, sweep_method
 from .floquet import hill_exponents_along, hill_follower, most_negative_real
 from .hb import HarmonicBalance, residual_functions
@@ -104,7 +104,7 @@ def half_order_mode(hb2: HarmonicBalance, z2, p: float, system) -> tuple[np.ndar
     """
     if hb2.nu != 2:
         raise ValueError(f"half_order_mode needs a nu = 2 discretisation, got nu = {hb2.nu}")
-    _, jac = hb2.residual_and_jacobian(jnp.asarray(z2), float(p), system)
+    _, jac = hb2.residual_and_jacobian(device_array(z2), float(p), system)
     idx = half_order_indices(hb2.ndof, hb2.harmonics)
     _, s, vt = np.linalg.svd(np.asarray(jac, dtype=float)[np.ix_(idx, idx)])
     phi = np.zeros(hb2.size)
@@ -122,7 +122,7 @@ def amplitude_residuals(hb2, system, p_star: float, phi, offset: float):
     """
 
     def both(y, a):
-        r, jz, jp = hb2.residual_and_jacobians(jnp.asarray(y[:-1]), float(y[-1] * p_star), system)
+        r, jz, jp = hb2.residual_and_jacobians(device_array(y[:-1]), float(y[-1] * p_star), system)
         r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
         top = np.hstack([np.asarray(jz, dtype=float), p_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
         jpar = np.zeros(len(r))
@@ -130,7 +130,7 @@ def amplitude_residuals(hb2, system, p_star: float, phi, offset: float):
         return r, np.vstack([top, np.append(phi, 0.0)]), jpar
 
     def resid(y, a):
-        r = hb2.residual(jnp.asarray(y[:-1]), float(y[-1] * p_star), system)
+        r = hb2.residual(device_array(y[:-1]), float(y[-1] * p_star), system)
         return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
 
     return both, resid

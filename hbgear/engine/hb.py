@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import condensed, events, fourier, structured
+from .arrays import device_array
 from .caching import BoundedCache
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
 from .typed_jit import typed_jit
@@ -884,11 +885,11 @@ def residual_functions(hb: HarmonicBalance, system):
 def _functions_of(hb: HarmonicBalance):
     def residual_and_jacobians(z, p, system, prepared):
         if prepared.condensed is not None:  # dR/dz as a PortJacobian (hbgear.engine.condensed)
-            return hb.residual_and_port_jacobians(jnp.asarray(z), p, system, prepared)
-        return hb.residual_and_jacobians(jnp.asarray(z), p, system, prepared)
+            return hb.residual_and_port_jacobians(device_array(z), p, system, prepared)
+        return hb.residual_and_jacobians(device_array(z), p, system, prepared)
 
     def residual(z, p, system, prepared):
-        return hb.residual(jnp.asarray(z), p, system, prepared)
+        return hb.residual(device_array(z), p, system, prepared)
 
     # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled)
     residual_and_jacobians.jacobian_is_structured = lambda system, prepared: prepared.condensed is not None

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from . import fourier
+from .arrays import device_array
 from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doublings
 from .continuation import Branch, Status, continuation, solve_at_parameter, sweep_method
 from .floquet import hill_multipliers, period_doubling
@@ -132,15 +133,13 @@ def newton_solve(hb: HarmonicBalance, system, p: float, z0, *, tolerance: float 
     steps by GMRES (a linear system's to the tolerance at once: one step).
     **Returns:** the :class:`~hbgear.engine.newton.NewtonResult`.
     """
-    import jax.numpy as jnp
-
     prepared = hb.prepare(system) if prepared is None else prepared
 
     def both(z):
-        return hb.residual_and_linearization(jnp.asarray(z), p, system, prepared)
+        return hb.residual_and_linearization(device_array(z), p, system, prepared)
 
     def resid(z):
-        return hb.residual(jnp.asarray(z), p, system, prepared)
+        return hb.residual(device_array(z), p, system, prepared)
 
     linear_rtol = 0.1 * tolerance if system.is_linear else None
     return newton(both, resid, np.asarray(z0, dtype=float), tolerance=tolerance, max_iterations=max_iterations,

@@ -46,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import fourier
+from .arrays import device_array
 from .krylov import KrylovInfo, gmres
 from .typed_jit import typed_jit
 
@@ -243,7 +244,7 @@ class StructuredJacobian:
         self._inverses = None
 
     def matvec(self, v) -> np.ndarray:
-        return np.asarray(_product_jit(self.hb, self.free_slot, self.linearization, jnp.asarray(v)))
+        return np.asarray(_product_jit(self.hb, self.free_slot, self.linearization, device_array(v)))
 
     def precondition(self, v) -> np.ndarray:
         """In numpy (once per solve: not worth a compiled program of its own)."""
@@ -255,7 +256,7 @@ class StructuredJacobian:
         """GMRES(:data:`RESTART`) with the mean-Jacobian preconditioner on the right, at most
         :data:`MAX_PRODUCTS` products; the best iterate and how far it got."""
         def operator(v):  # J Jbar^{-1} v, one compiled call
-            return np.asarray(_preconditioned_product_jit(self.hb, self.free_slot, self.linearization, jnp.asarray(v)))
+            return np.asarray(_preconditioned_product_jit(self.hb, self.free_slot, self.linearization, device_array(v)))
 
         return gmres(operator, b, precondition=self.precondition, rtol=rtol, restart=RESTART,
                      max_iterations=MAX_PRODUCTS)

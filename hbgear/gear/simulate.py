@@ -166,7 +166,7 @@ def _make_rhs(model, omega, u_static, minv, backend, with_jacobian):
     import jax.numpy as jnp
 
     jax.config.update("jax_enable_x64", True)
-    minv_j = jnp.asarray(minv)
+    minv_j = jax.device_put(np.asarray(minv))  # not jnp.asarray: no compiled program for the copy
 
     def rhs(s, y, reaction):
         force = model.generalized_force(s, y[:ndof], y[ndof:], omega, "all", u_static, reaction, xp=jnp)
