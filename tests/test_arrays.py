@@ -47,12 +47,15 @@ def test_device_array_keeps_values_and_dtype_and_compiles_nothing(compiled_progr
 
 
 def test_compile_log_sees_a_staged_array(compiled_programs):
-    """The fixture would catch a regression: ``jnp.asarray`` of a new shape is logged (where this
-    jax stages it through a program at all; older releases copy it directly)."""
+    """The fixture catches the regression the test below guards against: ``jnp.asarray`` of a new
+    shape is logged as a compiled ``stage`` (where this jax stages arrays at all; older releases
+    copy them directly, and then there is nothing to guard)."""
     import jax.numpy as jnp
 
-    jnp.asarray(np.zeros(53))
-    assert all(name == "jit(stage)" for name in compiled_programs)
+    if not hasattr(jax.lax, "stage"):
+        pytest.skip("this jax copies arrays without a staging program")
+    jnp.asarray(np.zeros((53, 7)))
+    assert compiled_programs == ["jit(stage)"]
 
 
 def test_newton_from_numpy_stages_no_array(compiled_programs):

@@ -98,7 +98,7 @@ def exact_batch_size(system) -> int:
     """Parameter values per batched exact-monodromy evaluation: 4096 at ``2n = 4`` states, fewer
     for more (``65536 / (2n)^2``, at least 256), so a batch's Magnus steps stay ~tens of MB. Each
     evaluation costs a few model evaluations in Python whatever its size (the LTV example's zone
-    scan of 12 000 values: 0.24-0.31 s in batches of 512, 0.19 s in batches of 4096)."""
+    scan of 12 000 values: 0.24-0.31 s in batches of 512, 0.19-0.23 s in batches of 4096)."""
     return max(256, 65536 // (2 * int(system.ndof)) ** 2)
 
 

@@ -160,12 +160,14 @@ class _Chord(NamedTuple):
     denominator: Any  # 1 + d . v
 
 
-def _no_factor(size, previous, xp=jnp) -> _Factor:
-    """An unusable chord factorisation (zeros), with `previous` (with ``xp = jnp``: numpy zeros put
-    on the device, not ``jnp.zeros``, which compiles a program of its own per shape)."""
-    put = jax.device_put if xp is jnp else (lambda a: a)
-    return _Factor(put(np.zeros((size + 1, size + 1))), put(np.zeros(size + 1, np.int32)), put(np.zeros(size + 1)),
-                   previous, put(np.asarray(False)))
+def _no_factor(size, previous, lu=None) -> _Factor:
+    """An unusable chord factorisation, with `previous`: zeros of the dense LU's shape, or `lu`
+    (zeros of a structured factorisation's). Numpy zeros put on the device, not ``jnp.zeros``,
+    which compiles a program of its own per shape."""
+    dense = lu is None
+    lu = np.zeros((size + 1, size + 1)) if dense else lu
+    perm = np.zeros(size + 1 if dense else 1, np.int32)  # the structured factorisation has no permutation
+    return _Factor(*jax.device_put((lu, perm, np.zeros(size + 1))), previous, jax.device_put(np.asarray(False)))
 
 
 # ------------------------------------------------------------------------------ linear algebra
@@ -448,7 +450,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
     problem = (residual_and_jacobians, residual, size)
     structured_lu = BoundedCache(8)  # abstract signature of `args` -> zeros of the structured LU, or None (dense)
 
-    def no_factor(previous, xp=jnp, args=()):
+    def no_factor(previous, args=()):
         """An unusable factorisation: zeros of the dense LU's shape or, when the Jacobian of these
         `args` is structured, of its factorisation's (found by an abstract evaluation, once per
         signature of `args`: a trace of the residual functions costs milliseconds of Python,
@@ -468,10 +470,7 @@ def _jit_corrector(residual_and_jacobians, residual, size):
 
         key = _signature(args)
         lu = zeros() if key is None else structured_lu.get_or_make(key, zeros)
-        if lu is None:
-            return _no_factor(size, previous, xp)
-        put = jax.device_put
-        return _Factor(lu, put(np.zeros(1, np.int32)), put(np.zeros(size + 1)), previous, put(np.asarray(False)))
+        return _no_factor(size, previous, lu)
 
     @typed_jit
     def advance(y_pred, row, target, previous, max_iter, tolerance, factor, scale, use_chord, y0, t0, ds0, budget,
