@@ -34,10 +34,12 @@ SHAFTS = dict(drive_inertia_kgm2=5e-3, load_inertia_kgm2=1e-2, drive_stiffness_N
               load_stiffness_Nm_per_rad=3e5, damping_ratio=0.02)
 
 
-def model_with(*overrides, shafts=False, bearings=True):
+def model_with(*overrides, shafts=False, bearings=True, shaft_damping_ratio=None):
     data = read_toml(EXAMPLE)
     if shafts:
         data["shafts"] = dict(SHAFTS)
+        if shaft_damping_ratio is not None:
+            data["shafts"]["damping_ratio"] = shaft_damping_ratio
     if not bearings:
         del data["bearings"]
     return build_model(parse_config(data, overrides))
@@ -142,10 +144,13 @@ def test_energy_identity_with_bearing_losses(overrides, shafts, limit):
                          ids=["LTV-6dof", "NLTV-8dof"])
 def test_harmonic_balance_against_time_integration(overrides, shafts):
     """HB (H = 48) against time integration to a steady state (reaction boundary): DTE and the four
-    bearing forces' RMS within 0.1 %."""
+    bearing forces' RMS within 0.1 %. The shafts damped at 10 % (not the 2 % of :data:`SHAFTS`):
+    their slowest mode then settles in ~250 mesh cycles instead of ~970 (18 s against 65 s of
+    integration; the agreement, 7e-5 and 5e-5 at worst, is the same)."""
     from hbgear.gear.simulate import simulate
 
-    m = model_with("boundary.output=reaction", *overrides, shafts=shafts)
+    m = model_with("boundary.output=reaction", *overrides, shafts=shafts,
+                   shaft_damping_ratio=0.1 if shafts else None)
     omega = rpm_to_rad_s(4500.0)
     hb = solve_periodic(m, omega, harmonics=48).summary()
     ti = simulate(m, omega, rtol=1e-10, steady_tolerance=1e-7, max_cycles=3000).summary
