@@ -65,24 +65,27 @@ def pytest_unconfigure(config):
         os.environ.pop(_CACHE_ENV, None)
 
 
-#: Test files by their time in a two-worker run, longest first (seconds of the slowest ones, on a
-#: loaded two-core machine); the files not named follow in their usual order. The pytest options
+#: Test files by their time in a two-worker run, longest first (the sums of their slowest tests,
+#: 2026-12-03, XLA code generation at level 0); the files not named follow in their usual order. The pytest options
 #: (pyproject.toml) keep this order: ``--no-loadscope-reorder`` (xdist would otherwise start the
 #: files with the most tests first, which puts these, with few and long tests, at the end).
 LONGEST_FIRST = (
-    "test_friction_contact.py",
-    "test_pair_contact_stability.py",
-    "test_structured.py",
-    "test_hb.py",
-    "test_pair_contact.py",
-    "test_pair_contact_checks.py",
-    "test_pair_contact_static.py",
     "test_condensed.py",
-    "test_events.py",
-    "test_bearings.py",
+    "test_pair_contact_stability.py",
+    "test_friction_contact.py",
+    "test_structured.py",
+    "test_pair_contact_checks.py",
+    "test_pair_contact.py",
+    "test_hb.py",
     "test_hill.py",
-    "test_continuation.py",
+    "test_bearings.py",
+    "test_events.py",
+    "test_study.py",
+    "test_pair_contact_static.py",
+    "test_frc_period_doubling.py",
+    "test_lti.py",
     "test_optimization_level.py",
+    "test_continuation.py",
 )
 
 
