@@ -21,9 +21,9 @@
   residual and Jacobian at H = 32, 64, 128: 52 s against 31 s). The graph-level passes (fusion,
   simplification) are the same; only LLVM's optimisation of the generated code is left out. Whole
   suite, two workers, with the Newton's Jacobian at full steps and the 8-DOF TI test's shaft
-  damping (the same day): 790 s, against 1007-1276 s without the three (2026-12-03). ``tests/test_optimization_level.py``
-  runs one command at the product's settings against the suite's. ``HBGEAR_TEST_XLA_OPTIMIZED=1``
-  runs the suite at the product's settings.
+  damping (the same day): 562-817 s in three runs, against 1007-1276 s without the three
+  (2026-12-03). ``tests/test_optimization_level.py`` runs one command at the product's settings
+  against the suite's. ``HBGEAR_TEST_XLA_OPTIMIZED=1`` runs the suite at the product's settings.
 """
 
 from __future__ import annotations
@@ -66,8 +66,8 @@ def pytest_unconfigure(config):
 
 
 #: Test files by their time in a two-worker run, longest first (the sums of their slowest tests,
-#: 2026-12-03, XLA code generation at level 0); the files not named follow in their usual order. The pytest options
-#: (pyproject.toml) keep this order: ``--no-loadscope-reorder`` (xdist would otherwise start the
+#: 2026-12-03, XLA code generation at level 0); the files not named follow in their usual order.
+#: The pytest options (pyproject.toml) keep this order: ``--no-loadscope-reorder`` (xdist would otherwise start the
 #: files with the most tests first, which puts these, with few and long tests, at the end).
 LONGEST_FIRST = (
     "test_condensed.py",
