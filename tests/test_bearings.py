@@ -145,7 +145,7 @@ def test_energy_identity_with_bearing_losses(overrides, shafts, limit):
 def test_harmonic_balance_against_time_integration(overrides, shafts):
     """HB (H = 48) against time integration to a steady state (reaction boundary): DTE and the four
     bearing forces' RMS within 0.1 %. The shafts damped at 10 % (not the 2 % of :data:`SHAFTS`):
-    their slowest mode then settles in ~250 mesh cycles instead of ~970 (18 s against 65 s of
+    their slowest mode then settles in ~250 mesh cycles instead of ~970 (18 s against 76 s of
     integration; the agreement, 7e-5 and 5e-5 at worst, is the same)."""
     from hbgear.gear.simulate import simulate
 
