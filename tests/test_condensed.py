@@ -17,7 +17,7 @@ import pytest
 from hbgear import build_model
 from hbgear.config import parse_config, read_toml
 from hbgear.engine.system import PeriodicSystem
-from hbgear.engine.condensed import as_matrix, check_input_map
+from hbgear.engine.condensed import as_matrix, check_input_map, lu_factor, lu_solve
 from hbgear.engine.continuation import continuation, sweep_method
 from hbgear.engine.hb import HarmonicBalance, residual_functions
 from hbgear.engine.response import _sized_functions_of, arclength_sizes
@@ -53,6 +53,19 @@ def both(system, harmonics=H, samples=SAMPLES):
 
 CASES = [(6, "LTV", ("mesh.backlash_um=20", "boundary.output=reaction")), (8, "NLTV", ()),
          (6, "LTV", ("boundary.output=torques", "friction.formulation=B"))]
+
+
+@pytest.mark.parametrize("size", [1, 5, 131])
+def test_lu_pair_solves_with_row_exchanges(size):
+    """``lu_solve(*lu_factor(a), b)`` (the LU of ``a^T``) solves ``a x = b`` for a matrix whose
+    elimination must exchange rows (a zero leading entry, small diagonal): backward error 1e-14."""
+    rng = np.random.default_rng(size)
+    a = rng.standard_normal((size, size)) + 1e-3 * np.eye(size)
+    a[0, 0] = 0.0 if size > 1 else 2.0
+    b = rng.standard_normal(size)
+    x = np.asarray(jax.jit(lambda a, b: lu_solve(*lu_factor(a), b))(jnp.asarray(a), jnp.asarray(b)))
+    scale = np.max(np.sum(np.abs(a), axis=1)) * np.max(np.abs(x)) + np.max(np.abs(b))
+    assert np.max(np.abs(a @ x - b)) <= 1e-14 * scale
 
 
 @pytest.mark.parametrize("dof, coupling, overrides", CASES)
