@@ -40,6 +40,22 @@ def test_convolution_matrix_is_the_product_in_time():
     np.testing.assert_allclose(fourier.convolution_matrix(p, harmonics) @ x, product, atol=1e-12)
 
 
+@pytest.mark.parametrize("harmonics", [1, 2, 7, 32])
+def test_convolution_gather_is_the_convolution_matrix(harmonics):
+    """Two gathers of the coefficients make T(p) and T(p) D_1 (the port Jacobian's assembly)."""
+    rng = np.random.default_rng(harmonics)
+    b = 2 * harmonics + 1
+    p = rng.normal(size=b) + 1j * rng.normal(size=b)
+    v = np.concatenate([p.real, p.imag])
+    for derivative in (False, True):
+        index, factor = fourier.convolution_gather(harmonics, derivative)
+        expected = fourier.convolution_matrix(p, harmonics)
+        if derivative:
+            expected = expected @ fourier.derivative_matrix(harmonics, 1.0)
+        gathered = factor[0] * v[index[0]] + factor[1] * v[index[1]]
+        np.testing.assert_allclose(gathered, expected, rtol=0, atol=1e-15 * harmonics * np.max(np.abs(expected)))
+
+
 def test_derivative_matrix_differentiates():
     harmonics, samples, omega = 5, 64, 3.0
     x = np.random.default_rng(2).normal(size=2 * harmonics + 1)

@@ -54,6 +54,7 @@ The free mean slot of a ``free_mean_dof`` (its column of ``J`` the unit vector) 
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any, NamedTuple
 
 import jax
@@ -63,7 +64,7 @@ import numpy as np
 from . import fourier
 
 __all__ = ["CondensedOperator", "port_operator", "PortJacobian", "PortFactor", "check_input_map", "port_basis",
-           "output_basis", "as_matrix", "port_matrix"]
+           "output_basis", "as_matrix", "port_matrix", "port_convolution"]
 
 
 class CondensedOperator(NamedTuple):
@@ -76,7 +77,9 @@ class CondensedOperator(NamedTuple):
     :func:`port_operator`) the linear operator
     ``L(w) = A(w) + (O (x) I)(P_K + w P_C)(C (x) I)``: `mean_stiffness`, `mean_damping`
     ``(n, n)`` (``Kb``, ``Cb``), `stiffness_ports` ``P_K`` and `damping_ports` ``P_C``
-    ``(r B, m B)`` (:func:`port_matrix`).
+    ``(r B, m B)`` (:func:`port_matrix`), and the complex coefficients they are made of,
+    `stiffness_coefficients` and `damping_coefficients` ``(r, m, B)`` (``O^T K(s) C^T`` and
+    ``O^T C(s) C^T``, the means zeroed: :func:`port_convolution` of them gives ``P_K`` and ``P_C``).
     """
 
     ports: Any
@@ -85,26 +88,26 @@ class CondensedOperator(NamedTuple):
     mean_damping: Any = None
     stiffness_ports: Any = None
     damping_ports: Any = None
+    stiffness_coefficients: Any = None
+    damping_coefficients: Any = None
 
 
 def port_operator(stiffness, damping, ports, outputs, harmonics: int, xp=jnp):
-    """``(Kb, Cb, P_K, P_C)`` of :class:`CondensedOperator` from the complex coefficients
-    ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)``, the port basis ``C`` ``(m, n)`` and the outputs
-    ``O^T`` ``(r, n)``: the means, and the convolution matrices of ``O^T (K(s) - Kb) C^T`` and
+    """``(Kb, Cb, P_K, P_C, c_K, c_C)`` of :class:`CondensedOperator` from the complex
+    coefficients ``(n, n, 2H+1)`` of ``K(s)``, ``C(s)``, the port basis ``C`` ``(m, n)`` and the
+    outputs ``O^T`` ``(r, n)``: the means, the convolution matrices of ``O^T (K(s) - Kb) C^T`` and
     ``O^T (C(s) - Cb) C^T (I (x) D_1)`` (``D_1`` the derivative at unit frequency) as
-    :func:`port_matrix` ``(r B, m B)``."""
+    :func:`port_matrix` ``(r B, m B)``, and those coefficients ``(r, m, B)``."""
     right = xp.asarray(ports).T.astype(stiffness.dtype)
     left = xp.asarray(outputs).astype(stiffness.dtype)
 
-    def blocks(coefficients):
+    def projected(coefficients):
         c = xp.einsum("ri,ijk,jl->rlk", left, coefficients, right)
-        c = xp.concatenate([0.0 * c[..., :1], c[..., 1:]], axis=-1)  # the mean is A's
-        return fourier.convolution_matrix(c, harmonics, xp)  # (r, m, B, B)
+        return xp.concatenate([0.0 * c[..., :1], c[..., 1:]], axis=-1)  # the mean is A's
 
-    # times (I_m (x) D_1) from the right: D_1 acts on each port's column coefficients
-    damping_ports = port_matrix(times_d1(blocks(damping), harmonics, xp), xp)
-    return (xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), port_matrix(blocks(stiffness), xp),
-            damping_ports)
+    c_k, c_c = projected(stiffness), projected(damping)
+    return (xp.real(stiffness[..., 0]), xp.real(damping[..., 0]), port_convolution(c_k, harmonics, xp=xp),
+            port_convolution(c_c, harmonics, derivative=True, xp=xp), c_k, c_c)
 
 
 def port_matrix(blocks, xp=jnp):
@@ -113,6 +116,33 @@ def port_matrix(blocks, xp=jnp):
     ``b``, column ``d m + j`` port ``j``'s coefficient ``d``."""
     r, m, b = blocks.shape[0], blocks.shape[1], blocks.shape[2]
     return xp.transpose(blocks, (2, 0, 3, 1)).reshape(b * r, b * m)
+
+
+@lru_cache(maxsize=16)
+def _port_gather(outputs: int, ports: int, harmonics: int, derivative: bool):
+    """:func:`port_convolution`'s tables: :func:`hbgear.engine.fourier.convolution_gather` laid out
+    as :func:`port_matrix` ``(2, r B, m B)``, the index into the flattened ``(r, m, 2B)``."""
+    index, factor = fourier.convolution_gather(harmonics, derivative)  # (2, B, B)
+    b = index.shape[1]
+    i = np.arange(outputs)[None, None, :, None, None]
+    j = np.arange(ports)[None, None, None, None, :]
+    flat = (i * ports + j) * (2 * b) + index[:, :, None, :, None]  # (2, B, r, B, m)
+    flat = flat.reshape(2, b * outputs, b * ports).astype(np.int32)
+    factor = np.broadcast_to(factor[:, :, None, :, None], (2, b, outputs, b, ports)).reshape(flat.shape)
+    return flat, np.ascontiguousarray(factor)
+
+
+def port_convolution(coefficients, harmonics: int, derivative: bool = False, xp=jnp):
+    """:func:`port_matrix` of the convolution matrices (:func:`hbgear.engine.fourier.convolution_matrix`,
+    times ``D_1`` with `derivative`) of complex `coefficients` ``(r, m, 2H+1)``: ``(r B, m B)``,
+    made by two gathers (:func:`hbgear.engine.fourier.convolution_gather`) in one pass."""
+    r, m = coefficients.shape[:2]
+    index, factor = _port_gather(r, m, harmonics, derivative)
+    v = xp.concatenate([xp.real(coefficients), xp.imag(coefficients)], axis=-1).reshape(-1)
+    if xp is np:
+        return v[index[0]] * factor[0] + v[index[1]] * factor[1]
+    return (v.at[index[0]].get(mode="promise_in_bounds") * factor[0]
+            + v.at[index[1]].get(mode="promise_in_bounds") * factor[1])
 
 
 def times_d1(a, harmonics: int, xp):

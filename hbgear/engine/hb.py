@@ -473,7 +473,7 @@ class HarmonicBalance:
         if prepared.structured is not None:
             return structured.linear_response(self, x, p, system, prepared)
         if prepared.condensed is not None:  # A(w) x + (P_K + w P_C)(C x): O(n B (n + m B))
-            k_bar, c_bar, k_ports, c_ports = self._port_operator(system, p, prepared)
+            k_bar, c_bar, k_ports, c_ports, _, _ = self._port_operator(system, p, prepared)
             w = self.base_frequency(system, p)
             xc = x.reshape(self.ndof, self.block)
             v1 = fourier.differentiate(xc, self.harmonics, 1.0, jnp)
@@ -769,11 +769,12 @@ class HarmonicBalance:
         return r, self._port_jacobian(z, p, system, prepared), jp
 
     def _port_operator(self, system, p, prepared):
-        """``(Kb, Cb, P_K, P_C)`` of :class:`~hbgear.engine.condensed.CondensedOperator`: kept, or
+        """``(Kb, Cb, P_K, P_C, c_K, c_C)`` of :class:`~hbgear.engine.condensed.CondensedOperator`: kept, or
         from the coefficients by quadrature (a parameter-dependent system)."""
         pieces = prepared.condensed
         if pieces.mean_stiffness is not None:
-            return pieces.mean_stiffness, pieces.mean_damping, pieces.stiffness_ports, pieces.damping_ports
+            return (pieces.mean_stiffness, pieces.mean_damping, pieces.stiffness_ports, pieces.damping_ports,
+                    pieces.stiffness_coefficients, pieces.damping_coefficients)
         _, stiffness, damping = self._periodic_coefficients(system, p, prepared.rule)
         return condensed.port_operator(stiffness, damping, pieces.ports, pieces.outputs, self.harmonics, jnp)
 
@@ -786,17 +787,24 @@ class HarmonicBalance:
         pieces = prepared.condensed
         w = self.base_frequency(system, p)
         scale = system.displacement_scale / system.force_scale
-        k_bar, c_bar, k_ports, c_ports = self._port_operator(system, p, prepared)
-        u = k_ports + w * c_ports
-        if not system.is_linear:
+        k_bar, c_bar, k_ports, c_ports, c_k, c_c = self._port_operator(system, p, prepared)
+        if system.is_linear:
+            u = k_ports + w * c_ports
+        else:
             x, extra = self._split(system, z)
-            t_q, t_v, g_q, g_v = self._nonlinear_port_blocks(x, extra, p, system, prepared.jumps, pieces.ports.T,
-                                                             pieces.outputs)
+            g_q, g_v, t_q, t_v, rest = self._nonlinear_port_parts(x, extra, p, system, prepared.jumps, pieces.ports.T,
+                                                                  pieces.outputs, w)
             # A holds the mean derivatives of Q_nl too (a mesh that is all nonlinear, backlash,
             # leaves Kb no stiffness on its coordinate): the mean Jacobian, as the structured
             # path's preconditioner
             k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
-            u = u - condensed.port_matrix(t_q + w * condensed.times_d1(t_v, H, jnp))
+            # U~ = P_K + w P_C - (T_q + w T_v D_1): the convolution parts gathered at once from
+            # the coefficients' differences, the jump terms apart
+            u = w * condensed.port_convolution(c_c - t_v, H, derivative=True) - rest
+            if t_q is not None:
+                u = u + condensed.port_convolution(c_k - t_q, H)
+            else:
+                u = u + k_ports
         u = u * scale
         mass = system.mass_matrix(p, jnp)
         kw = w * jnp.arange(1, H + 1)[:, None, None]
@@ -813,32 +821,40 @@ class HarmonicBalance:
         return condensed.PortJacobian(mean, blocks, jnp.linalg.inv(mean), jnp.linalg.inv(blocks), u, pieces.ports,
                                       pieces.outputs, keep)
 
-    def _nonlinear_port_blocks(self, x, extra, p, system, layout, right, left):
-        """``(T_q, T_v, Gb_q, Gb_v)``: :meth:`_nonlinear_jacobian`'s blocks between ``left (x) I`` and
-        ``right (x) I``, ``(r, m, B, B)``, without the means ``Gb`` ``(n, m)`` of the sampled
-        derivatives (returned apart, not projected: ``A`` holds all of them), from ``m``
-        directional derivatives (the columns of `right` ``(n, m)``), the blocks projected on the
-        rows of `left` ``(r, n)``."""
-        n, H, N = self.ndof, self.harmonics, self.samples
+    def _nonlinear_port_parts(self, x, extra, p, system, layout, right, left, w):
+        """``(Gb_q, Gb_v, c_q, c_v, J)``: :meth:`_nonlinear_jacobian`'s ``T_q + w T_v D_1`` between
+        ``left (x) I`` and ``right (x) I`` (``r`` outputs, ``m`` ports) from ``m`` directional
+        derivatives (the columns of `right` ``(n, m)``) projected on the rows of `left` ``(r, n)``:
+        the means ``Gb`` ``(n, m)`` of the sampled derivatives (not projected: ``A`` holds all of
+        them), the complex coefficients ``(r, m, B)`` of the rest (means zeroed) whose convolution
+        matrices are ``T_q`` and ``T_v`` (``c_q`` ``None`` when ``Q_nl`` does not use ``q``), and ``J``
+        ``(r B, m B)``: the jump terms ``delta_c^T J_c at_c`` (``at_c D_1`` for ``T_v``) and the
+        event systems' moving jumps, as :func:`~hbgear.engine.condensed.port_matrix`."""
+        n, H, N, B = self.ndof, self.harmonics, self.samples, self.block
         derivatives, (_, at_c, weight, delta) = self._nonlinear_derivatives(x, extra, p, system, layout, right)
         means = jnp.mean(derivatives[..., :N], axis=-1)  # (1|2, n, m)
         derivatives = jnp.einsum("ri,kijs->krjs", left, derivatives)
-        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., : 2 * H + 1] / N
+        coeff = jnp.fft.rfft(derivatives[..., :N], axis=-1)[..., :B] / N
         coeff = jnp.concatenate([0.0 * coeff[..., :1], coeff[..., 1:]], axis=-1)
-        blocks = fourier.convolution_matrix(coeff, H, jnp)  # (1|2, r, m, B, B)
-        blocks = blocks + jnp.einsum("cb,kijc,cd->kijbd", delta, _jumps(derivatives[..., N:], weight), at_c)
+        jumps = _jumps(derivatives[..., N:], weight)  # (1|2, r, m, C)
+        r, m = left.shape[0], right.shape[1]
         uses_q = system.nonlinear_force_uses_displacement
-        t_q = blocks[0] if uses_q else jnp.zeros_like(blocks[0])
-        t_v = blocks[-1]
-        g_q = means[0] if uses_q else jnp.zeros_like(means[0])
-        g_v = means[-1]
+        at_rows, jump_rows = w * condensed.times_d1(at_c, H, jnp), jumps[-1]
+        if uses_q:
+            at_rows = jnp.concatenate([at_c, at_rows], axis=0)
+            jump_rows = jnp.concatenate([jumps[0], jump_rows], axis=-1)
+            delta = jnp.concatenate([delta, delta], axis=0)
+        # sum_c delta[c, b] J[i, j, c] at[c, d] at row b r + i, column d m + j
+        rest = jnp.einsum("cb,ijc,cd->bidj", delta, jump_rows, at_rows).reshape(B * r, B * m)
         if events.declared(system, p):
             velocity = self._velocity(x, system, p)
             e_q, e_v = events.jump_jacobian(system, p, extra, x.reshape(n, self.block), velocity.reshape(n, self.block),
                                             self.harmonics, self.nu, self.samples)
-            t_q = t_q + jnp.einsum("ri,ijbd,jl->rlbd", left, e_q, right)
-            t_v = t_v + jnp.einsum("ri,ijbd,jl->rlbd", left, e_v, right)
-        return t_q, t_v, g_q, g_v
+            e_q = jnp.einsum("ri,ijbd,jl->rlbd", left, e_q, right)
+            e_v = jnp.einsum("ri,ijbd,jl->rlbd", left, e_v, right)
+            rest = rest + condensed.port_matrix(e_q + w * condensed.times_d1(e_v, H, jnp))
+        g_q = means[0] if uses_q else jnp.zeros_like(means[0])
+        return g_q, means[-1], (coeff[0] if uses_q else None), coeff[-1], rest
 
     @partial(typed_jit, static_argnums=0)
     def _hill_matrices_jit(self, z, p, system, prepared):
