@@ -136,6 +136,31 @@ def test_continuation_curves_are_the_dense_ones(dof, coupling):
     assert np.max(other[:, 1]) <= max(1e-10 * scale, 2.0 * np.max(own[:, 1]))
 
 
+def test_port_jacobian_with_moving_contact_events_is_the_dense_one():
+    """The relieved ISO pair (contact that opens at state-dependent instants: the event
+    functions' moving jumps) on bearings, NLTV: at a state large enough for contact loss the
+    events' Jacobian is not zero, and the condensed Jacobian (the gathered convolution part, the
+    fixed jumps and the moving ones in the port layout) and residual are the dense path's to
+    1e-13."""
+    from hbgear.engine import events
+
+    data = read_toml(EXAMPLE.parent / "iso_tip_relief.toml")
+    data["bearings"] = {"pinion_stiffness_MN_per_m": 500.0, "gear_stiffness_MN_per_m": 500.0, "damping_ratio": 0.02}
+    system = GearSystem(build_model(parse_config(data, list(COUPLINGS["NLTV"]))))
+    (hb, rj_d, _, args_d), (_, rj_c, _, args_c) = both(system)
+    assert args_c[1].condensed is not None and system.nonlinear_force_uses_displacement
+    p = rpm_to_rad_s(6000.0)
+    z = jnp.asarray(np.random.default_rng(0).standard_normal(hb.size))
+    x, extra = hb._split(system, z)
+    xc, vc = x.reshape(system.ndof, hb.block), hb._velocity(x, system, p).reshape(system.ndof, hb.block)
+    moving = events.jump_jacobian(system, p, extra, xc, vc, hb.harmonics, hb.nu, hb.samples)
+    assert np.max(np.abs(np.asarray(moving[0]))) > 0.0 and np.max(np.abs(np.asarray(moving[1]))) > 0.0
+    r1, j1, _ = (np.asarray(a) for a in rj_d(z, p, *args_d))
+    r2, j2, _ = rj_c(z, p, *args_c)
+    assert np.max(np.abs(np.asarray(as_matrix(j2)) - j1)) <= 1e-13 * np.max(np.abs(j1))
+    assert np.max(np.abs(np.asarray(r2) - r1)) <= 1e-13 * np.max(np.abs(r1))
+
+
 def test_auto_takes_the_condensed_path_only_where_it_pays():
     """``operator="auto"``: the 8-DOF pair at H = 32 is condensed, the 2-DOF pair (nothing to
     condense at 130 unknowns) and any system without an input map stay dense."""
