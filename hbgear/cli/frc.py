@@ -127,8 +127,16 @@ def _summary(curve, config, args, method_options, timings, orders=None) -> dict:
         "model": {"coupling": model.coupling, "formulation": model.formulation, "boundary": model.boundary,
                   "contact": model.contact, "friction_law": repr(model.friction), "ndof": model.ndof,
                   "coordinates": list(model.layout.coordinates)},
-        "timings_s": timings, "config": config.to_dict(),
+        "timings_s": timings, "programs": _programs(), "config": config.to_dict(),
     }
+
+
+def _programs() -> dict:
+    """Where the traced programs are kept and how many this run loaded, exported or traced
+    (:func:`hbgear.engine.persistent.stats`): a warm run loads and exports none."""
+    from ..engine import persistent
+
+    return persistent.stats()
 
 
 def _report(curve, out_dir, seconds) -> None:

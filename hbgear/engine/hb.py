@@ -907,8 +907,10 @@ def _functions_of(hb: HarmonicBalance):
     def residual(z, p, system, prepared):
         return hb.residual(device_array(z), p, system, prepared)
 
-    # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled)
+    # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled); all
+    # they close over is `hb` (frozen settings): programs traced from them may be kept on disk
     residual_and_jacobians.jacobian_is_structured = lambda system, prepared: prepared.condensed is not None
+    residual_and_jacobians.program_key = residual.program_key = ("engine.hb._functions_of", hb)
     return residual_and_jacobians, residual
 
 

@@ -136,7 +136,12 @@ def _pencil_function(hb, batched: bool):
             w = hb.base_frequency(system, p)
             return jnp.stack([a0, w * d1, (w * w) * d2])
 
-        _PENCIL_FUNCTIONS[key] = typed_jit(jax.vmap(pencil, in_axes=(0, 0, None, None)) if batched else pencil)
+        from .persistent import persistent
+
+        compiled = typed_jit(jax.vmap(pencil, in_axes=(0, 0, None, None)) if batched else pencil)
+        # all it closes over is `hb` (frozen settings): its traced program may be kept on disk
+        _PENCIL_FUNCTIONS[key] = persistent(compiled, "hill-pencils" if batched else "hill-pencil",
+                                            ("engine.hill._pencil_function", hb, batched))
     return _PENCIL_FUNCTIONS[key]
 
 

@@ -289,9 +289,12 @@ def _variational_rhs(batched: bool = False):
             return jax.vmap(member, in_axes=(None, None, 0, 0, 0, 0, 0, 0))(system, y[0], q, qd, p, minv, period,
                                                                            phi).ravel()
 
+        from .persistent import persistent
         from .typed_jit import typed_jit
 
-        _VARIATIONAL_RHS[batched] = typed_jit(rhs)
+        compiled = typed_jit(rhs)
+        # it closes over nothing but `batched`: its traced program may be kept on disk
+        _VARIATIONAL_RHS[batched] = persistent(compiled, "variational-rhs", ("engine.monodromy._variational_rhs", batched))
     return _VARIATIONAL_RHS[batched]
 
 
@@ -366,7 +369,8 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
     else:
         device_system, *constants = jax.device_put((system, float(ps[0]), minv[0], float(base_period[0])))
     phi = np.broadcast_to(np.eye(2 * n), (size, 2 * n, 2 * n)) if batch else np.eye(2 * n)
-    variational_rhs = variational_rhs.typed_for(device_system, *constants, np.zeros(1))  # the classes, once
+    template = np.zeros(1 + 2 * size * n + size * (2 * n) ** 2 if batch else 1 + 2 * n + (2 * n) ** 2)
+    variational_rhs = variational_rhs.for_arguments(device_system, *constants, template)  # looked up once
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a < 1e-14:
             continue

@@ -361,6 +361,8 @@ def _sized_functions_of(hb: HarmonicBalance):
         return hb.residual(jnp.asarray(y) * sizes, p, system, prepared)
 
     residual_and_jacobians.jacobian_is_structured = lambda system, prepared, sizes: prepared.condensed is not None
+    # all they close over is `hb` (frozen settings): programs traced from them may be kept on disk
+    residual_and_jacobians.program_key = residual.program_key = ("engine.response._sized_functions_of", hb)
     return residual_and_jacobians, residual
 
 

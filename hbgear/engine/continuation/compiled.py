@@ -39,6 +39,7 @@ import numpy as np
 from ..caching import BoundedCache
 from ..condensed import lu_factor, lu_solve
 from ..newton import SUFFICIENT_DECREASE, NewtonStatus
+from ..persistent import persistent
 from ..typed_jit import node_types, typed_jit
 from .corrector import CHORD_ITERATION_WORK, LINE_SEARCH_MIN_STEP, _failure, _Point
 from .steps import _grown_step, _limited_step
@@ -500,6 +501,10 @@ def _jit_corrector(residual_and_jacobians, residual, size):
         s = jax.lax.while_loop(lambda s: _running(~s.done, s.k), turn, state)
         return s.k, (s.y_out, s.t_out, s.info), (s.y, s.t, s.ds), s.factor, s.pending
 
+    # residual functions that say what they close over (``program_key``, e.g. the harmonic
+    # balance settings) let the traced corrector be kept on disk (hbgear.engine.persistent)
+    key = getattr(residual_and_jacobians, "program_key", None)
+    advance.program_key = None if key is None or getattr(residual, "program_key", None) != key else (key, size)
     return advance, no_factor
 
 
@@ -512,6 +517,8 @@ class _Compiled:
         advance, no_factor = compiled
         self.args = tuple(args)
         self.advance = advance.typed_for(args=self.args)  # the classes of the system walked once, not per call
+        if advance.program_key is not None:
+            self.advance = persistent(self.advance, "advance", advance.program_key)
         self.chord, self.scale = bool(chord), float(scale)
         self.controls = SegmentControls(*(np.float64(c) for c in (np.zeros(9) if controls is None else controls)))
         self.last = None
