@@ -186,3 +186,44 @@ def test_a_warm_frc_run_loads_its_programs_and_writes_the_same_files(tmp_path):
         text = (tmp_path / "plain" / name).read_bytes()
         assert (tmp_path / "first" / name).read_bytes() == text
         assert (tmp_path / "second" / name).read_bytes() == text
+
+
+def test_static_settings_are_in_the_key_and_traces_inside_other_functions_are_left_alone(kept):
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.system import Duffing
+    from hbgear.engine.typed_jit import typed_jit
+
+    f = persistent.persistent(typed_jit(lambda hb, x: x * hb.harmonics + hb.nu, static_argnums=0), "static",
+                              ("test",), static_argnums=0)
+    a, b = HarmonicBalance(1, 3), HarmonicBalance(1, 5)
+    e0 = _counts()[0]
+    assert np.array_equal(f(a, np.ones(2)), 4.0 * np.ones(2))
+    assert np.array_equal(f(b, np.ones(2)), 6.0 * np.ones(2))
+    assert _counts()[0] == e0 + 2  # one program per setting
+    _new_process()
+    g = persistent.persistent(typed_jit(lambda hb, x: x * hb.harmonics + hb.nu, static_argnums=0), "static",
+                              ("test",), static_argnums=0)
+    assert np.array_equal(g(b, np.ones(2)), 6.0 * np.ones(2)) and np.array_equal(g(a, np.ones(2)), 4.0 * np.ones(2))
+
+    @dataclass(frozen=True)
+    class Settings:  # frozen but not hbgear's: its repr need not say all of it
+        harmonics: int = 2
+        nu: int = 1
+
+    _, _, p0 = _counts()
+    assert np.array_equal(f(Settings(), np.ones(2)), 3.0 * np.ones(2))
+    assert _counts()[2] == p0 + 1
+    # inside another function's trace: the plain function, nothing exported
+    e1 = _counts()[0]
+    assert np.array_equal(jax.jit(lambda x: f(a, x))(np.ones(3)), 4.0 * np.ones(3))
+    assert _counts()[0] == e1
+    # the harmonic-balance residual of a system of hbgear's: kept, and the plain one's numbers
+    hb, duffing = HarmonicBalance(1, 3, 1, 16), Duffing(damping=0.02, stiffness=1.0, cubic=0.1, forcing=0.05)
+    z = np.linspace(0.1, -0.2, hb.size)
+    kept_residual = np.asarray(hb.residual(z, 0.9, duffing))
+    _new_process()
+    loaded_residual = np.asarray(hb.residual(z, 0.9, duffing))
+    persistent.disable()
+    plain_residual = np.asarray(hb.residual(z, 0.9, duffing))
+    assert np.array_equal(kept_residual, plain_residual) and np.array_equal(loaded_residual, plain_residual)
+    assert list(kept.rglob("hb_residual_jit-*.bin"))

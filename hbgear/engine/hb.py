@@ -41,7 +41,7 @@ the ports. :meth:`HarmonicBalance.residual_and_jacobians` and the Hill matrices 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import lru_cache
 from typing import Any, NamedTuple
 
 import jax
@@ -52,6 +52,7 @@ from . import condensed, events, fourier, structured
 from .arrays import device_array
 from .caching import BoundedCache
 from .quadrature import LatticeRule, lattice_coefficients, lattice_rule, mesh_period_rule
+from .persistent import persistent
 from .typed_jit import typed_jit
 
 
@@ -150,6 +151,13 @@ class Prepared(NamedTuple):
         """The frozen forcing pieces of either path (or ``None``: quadrature at every call)."""
         holder = self.structured if self.structured is not None else self.frozen
         return None if holder is None else holder.forcing
+
+
+def _kept_method(method):
+    """``typed_jit`` with the ``HarmonicBalance`` (``self``, frozen settings) static, its traced
+    programs kept on disk when a directory is enabled (:mod:`hbgear.engine.persistent`)."""
+    return persistent(typed_jit(method, static_argnums=0), f"hb{method.__name__}", f"engine.hb.{method.__name__}",
+                      static_argnums=0)
 
 
 @dataclass(frozen=True)
@@ -654,7 +662,7 @@ class HarmonicBalance:
         """
         return self._hill_matrices_jit(z, p, system, self.prepare(system) if prepared is None else prepared)
 
-    @partial(typed_jit, static_argnums=0)
+    @_kept_method
     def _residual_jit(self, z, p, system, prepared):
         return self._residual(z, p, system, prepared)
 
@@ -746,12 +754,12 @@ class HarmonicBalance:
             jac = jac.at[:, slot].set(0.0).at[slot, slot].add(1.0)
         return jac
 
-    @partial(typed_jit, static_argnums=0)
+    @_kept_method
     def _residual_and_jacobian_jit(self, z, p, system, prepared):
         operator = self.linear_operator(system, p, prepared)
         return self._residual(z, p, system, prepared, operator), self._jacobian(z, p, system, prepared, operator)
 
-    @partial(typed_jit, static_argnums=0)
+    @_kept_method
     def _residual_and_jacobians_jit(self, z, p, system, prepared):
         # R and dR/dp as ONE directional derivative in p (its primal is R; a joint jacfwd would
         # push all size+1 tangents through the operator's construction), dR/dz at a fixed operator
@@ -763,7 +771,7 @@ class HarmonicBalance:
         :class:`~hbgear.engine.condensed.PortJacobian` (`prepared` must hold the condensed pieces)."""
         return self._residual_and_port_jacobians_jit(z, p, system, prepared)
 
-    @partial(typed_jit, static_argnums=0)
+    @_kept_method
     def _residual_and_port_jacobians_jit(self, z, p, system, prepared):
         r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
         return r, self._port_jacobian(z, p, system, prepared), jp
@@ -856,7 +864,7 @@ class HarmonicBalance:
         g_q = means[0] if uses_q else jnp.zeros_like(means[0])
         return g_q, means[-1], (coeff[0] if uses_q else None), coeff[-1], rest
 
-    @partial(typed_jit, static_argnums=0)
+    @_kept_method
     def _hill_matrices_jit(self, z, p, system, prepared):
         x, extra = self._split(system, z)
         lin, _, c_conv = self.linear_operator(system, p, prepared)

@@ -175,31 +175,46 @@ class _Program:
         return jax.tree_util.tree_unflatten(self.out_tree, self.call(*leaves))
 
 
-def persistent(fun, name: str, static_key):
+def persistent(fun, name: str, static_key=(), *, static_argnums=()):
     """`fun` (called with pytrees of arrays and numbers, traceable by ``jax.jit``), its programs
     kept on disk (module docstring). `name` names the files; `static_key` (its ``repr``) must
-    describe everything `fun` closes over that is not in this module's code fingerprint.
+    describe everything `fun` closes over that is not in this module's code fingerprint;
+    `static_argnums`: positional arguments that are static (hashable hbgear settings such as a
+    ``HarmonicBalance``, or plain values), in the key by their ``repr``. Called inside a trace
+    (any leaf a tracer) it is the plain function.
 
     The returned function has ``for_arguments(*args, **kwargs)``: the function for a loop of
     calls whose arguments all have the structure, shapes and dtypes of these (a mismatch raises:
     an exported program checks its arguments), without the per-call lookup."""
-    programs: dict = {}  # (tree structure, node classes, avals) -> _Program, or None: not kept
+    static = (static_argnums,) if isinstance(static_argnums, int) else tuple(static_argnums)
+    programs: dict = {}  # (static values, tree structure, node classes, avals) -> _Program, or None
+
+    def split(args):
+        return tuple(args[i] for i in static), tuple(a for i, a in enumerate(args) if i not in static)
 
     def lookup(args, kwargs):
-        """``(program or None, leaves)`` for these arguments."""
+        """``(program or None, leaves of the dynamic arguments)``."""
         import jax
 
-        leaves, tree = jax.tree_util.tree_flatten((args, kwargs))
+        static_values, dynamic = split(args)
+        leaves, tree = jax.tree_util.tree_flatten((dynamic, kwargs))
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+            return None, leaves  # inside another function's trace: that program holds this one
         avals = tuple(_aval(leaf) for leaf in leaves)
-        signature = (tree, node_types((args, kwargs)), avals)  # the classes too (hbgear.engine.typed_jit)
         try:
+            signature = (static_values, tree, node_types((dynamic, kwargs)), avals)  # classes: typed_jit
             return programs[signature], leaves
-        except (KeyError, TypeError):
-            program = _program(fun, name, static_key, args, kwargs, leaves, tree, avals, _STATE["directory"])
-        try:
-            programs[signature] = program
-        except TypeError:
+        except KeyError:
             pass
+        except TypeError:  # an unhashable static value: never kept
+            return None, leaves
+        program = None
+        if all(_static_is_covered(v) for v in static_values):
+            program = _program(_with_static(fun, static, static_values), name, (static_key, static_values),
+                               (dynamic, kwargs), leaves, tree, avals, _STATE["directory"])
+        else:
+            _STATS["plain"] += 1
+        programs[signature] = program
         return program, leaves
 
     def call(*args, **kwargs):
@@ -221,27 +236,55 @@ def persistent(fun, name: str, static_key):
 
     def for_arguments(*args, **kwargs):
         program = None if _STATE["directory"] is None else lookup(args, kwargs)[0]
-        if program is None or program.state == "broken":  # the plain function, bound too if it can be (typed_jit's typed_for)
+        if program is None or program.state == "broken":  # the plain function, bound too if it can be (typed_for)
             return fun.typed_for(*args, **kwargs) if hasattr(fun, "typed_for") else fun
         import jax
 
         def bound(*args, **kwargs):
-            return program(jax.tree_util.tree_leaves((args, kwargs)))
+            return program(jax.tree_util.tree_leaves((split(args)[1], kwargs)))
 
         return bound
 
     call.for_arguments = for_arguments
     call.persisted = fun  # the function it keeps programs of
+    if hasattr(fun, "_cache_size"):  # typed_jit's count of compiled programs (tests)
+        call._cache_size = fun._cache_size
     return call
 
 
-def _program(fun, name, static_key, args, kwargs, leaves, tree, avals, directory) -> _Program | None:
-    """The kept program for these arguments: loaded, or exported and written; ``None`` when they
-    cannot be kept (module docstring) or exporting fails."""
+def _with_static(fun, static: tuple, static_values: tuple):
+    """``fun`` of the dynamic arguments only (the static ones put back in their places)."""
+    if not static:
+        return fun
+
+    def dynamic_only(*dynamic, **kwargs):
+        given, rest = dict(zip(static, static_values)), iter(dynamic)
+        args = [given[i] if i in given else next(rest) for i in range(len(static) + len(dynamic))]
+        return fun(*args, **kwargs)
+
+    return dynamic_only
+
+
+def _static_is_covered(value) -> bool:
+    """A plain value, or a frozen dataclass of hbgear's whose fields are plain values (its ``repr``
+    then says all of it)."""
+    import dataclasses
+
+    if _plain(value):
+        return True
+    if dataclasses.is_dataclass(value) and _own_class(type(value)) and type(value).__dataclass_params__.frozen:
+        return all(f.repr and _plain(getattr(value, f.name)) for f in dataclasses.fields(value))
+    return False
+
+
+def _program(fun, name, static_key, arguments, leaves, tree, avals, directory) -> _Program | None:
+    """The kept program for these arguments (``(dynamic args, kwargs)``, flattened to `leaves` of
+    structure `tree`): loaded, or exported and written; ``None`` when they cannot be kept (module
+    docstring) or exporting fails."""
     if any(a is None for a in avals) or not _structure_is_covered(tree):
         _STATS["plain"] += 1
         return None
-    types = [f"{t.__module__}.{t.__qualname__}" for t in node_types((args, kwargs))]
+    types = [f"{t.__module__}.{t.__qualname__}" for t in node_types(arguments)]
     fingerprint = code_fingerprint()
     key = hashlib.sha256(repr((fingerprint, name, repr(static_key), str(tree), types, avals)).encode())
     path = Path(directory) / fingerprint[:FINGERPRINT_CHARS] / f"{name}-{key.hexdigest()[:40]}.bin"
