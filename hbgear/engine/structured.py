@@ -48,6 +48,7 @@ import numpy as np
 from . import fourier
 from .arrays import device_array
 from .krylov import KrylovInfo, gmres
+from .persistent import persistent
 from .typed_jit import typed_jit
 
 __all__ = ["StructuredOperator", "Linearization", "StructuredJacobian", "prepare_structured", "product_samples",
@@ -186,7 +187,14 @@ def _mean_blocks(hb, lin: Linearization, free_slot):
     return mean, blocks
 
 
-@partial(typed_jit, static_argnums=0)
+def _kept_linearization(function):
+    """``typed_jit`` with the ``HarmonicBalance`` static, its traced programs kept on disk when a
+    directory is enabled (:mod:`hbgear.engine.persistent`)."""
+    return persistent(typed_jit(function, static_argnums=0), "structured-linearize",
+                      "engine.structured._linearize_jit", static_argnums=0)
+
+
+@_kept_linearization
 def _linearize_jit(hb, z, p, system, prepared):
     x, extra = hb._split(system, z)
     _, stiffness, damping = _operator_samples(hb, system, p, prepared)
