@@ -170,12 +170,14 @@ def run(config, args, out_dir) -> int:
 
     from ..api import frc_curve
     from ..engine.continuation import sweep_method
+    from ..engine.prefetch import import_in_background
     from ..errors import ConvergenceError
     from ..gear.response import FLOQUET_COLUMNS
     from ..gear.solve import rpm_to_rad_s
     from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
 
     t0 = time.perf_counter()
+    import_in_background("matplotlib.figure", "matplotlib.backends.backend_agg")  # the figures, drawn last
     so, sw = config.solver, config.sweep
     flag, _ = _period_doubling_flag(config, args)
     curve = frc_curve(config, stability=not args.no_stability, period_doubling=flag,

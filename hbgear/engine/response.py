@@ -27,6 +27,7 @@ from .continuation import Branch, Status, continuation, solve_at_parameter, swee
 from .floquet import hill_multipliers, period_doubling
 from .hb import HarmonicBalance, residual_functions
 from .newton import NewtonResult, newton
+from .prefetch import import_in_background
 from .stability import BranchStability, branch_stability, unstable_zones
 from .system import check_system
 
@@ -464,6 +465,8 @@ def frequency_response(system, parameter: tuple[float, float], *, harmonics: int
     hb = HarmonicBalance(system.ndof, harmonics, nu, samples)
     clock = time.perf_counter
     t0 = clock()
+    if period_doubling and stability and nu == 1 and not system.is_linear:
+        import_in_background("scipy.integrate")  # the search's variational monodromy, during the curve
     branch = _follow(system, hb, p0, p1, z0, tolerance=tolerance, max_points=max_points,
                      max_iterations=max_iterations, step=step, progress=progress, start=start)
     t1 = clock()
