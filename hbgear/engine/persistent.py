@@ -8,16 +8,22 @@ later processes deserialise it (milliseconds) instead; the compiled program then
 JAX's disk cache as before. The results are those of the traced function.
 
 A kept program is found by a key that holds everything its trace depends on, so that a stale
-program is never used: a fingerprint of the code (every source file of hbgear, the versions of
-Python, jax, jaxlib and numpy, the JAX settings that change a trace, the backend), what the
-caller says the function closes over (`static_key`: here the frozen ``HarmonicBalance``
-settings), and the arguments' tree structure (with the class and static fields of every node)
-and each leaf's shape, dtype and weak type. Arguments that could hold anything the fingerprint
-does not cover -- a node class defined outside hbgear (a user's system: its source is not
-hashed), a static field that is not a plain value, a leaf that is not an array or a number --
-are never kept: that call is the plain function's. So is every call when no directory is
-enabled (the library's default; the ``hbgear`` command enables one beside JAX's cache), when
-exporting fails, or when a kept file does not load.
+program is never used:
+
+- a fingerprint of the code: every source file of hbgear, the versions of Python, jax, jaxlib,
+  numpy and scipy (traces use ``scipy.fft``'s sizes), the JAX settings that change a trace, the
+  backend;
+- what the caller says the function closes over (`static_key`, e.g. the frozen
+  ``HarmonicBalance`` settings) and its static arguments;
+- the arguments' tree structure, with the class and static fields of every node, and each
+  leaf's shape, dtype and weak type.
+
+Arguments the fingerprint does not cover -- a node class defined outside hbgear (a user's system:
+its source is not hashed), a static field or argument that is not a plain value, a leaf that is
+not an array or a number -- are never kept: that call is the plain function's. So is every call
+inside another function's trace, every call when no directory is enabled (the library's
+default; the ``hbgear`` command enables one beside JAX's cache), and a call whose export fails or
+whose kept file does not load (it is then exported again).
 """
 
 from __future__ import annotations
@@ -70,19 +76,21 @@ def stats() -> dict:
 
 def code_fingerprint(root: str | os.PathLike | None = None) -> str:
     """SHA-256 of every ``.py`` file under `root` (default: the hbgear package; path and content),
-    the versions of Python, jax, jaxlib and numpy, the JAX settings a trace depends on and the
+    the versions of Python, jax, jaxlib, numpy and scipy, the JAX settings a trace depends on and the
     default backend (computed once per process for the package)."""
     if root is None and _STATE["fingerprint"] is not None:
         return _STATE["fingerprint"]
     import jax
     import jaxlib
+    import scipy
 
     digest = hashlib.sha256()
     base = Path(__file__).resolve().parents[1] if root is None else Path(root)
     for path in sorted(base.rglob("*.py")):
         digest.update(str(path.relative_to(base)).encode())
         digest.update(path.read_bytes())
-    settings = [sys.version, jax.__version__, jaxlib.__version__, np.__version__, jax.default_backend()]
+    settings = [sys.version, jax.__version__, jaxlib.__version__, np.__version__, scipy.__version__,
+                jax.default_backend()]
     for name in ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion",
                  "jax_numpy_rank_promotion", "jax_default_prng_impl", "jax_enable_checks"):
         settings.append(f"{name}={getattr(jax.config, name, None)!r}")
