@@ -227,3 +227,35 @@ def test_static_settings_are_in_the_key_and_traces_inside_other_functions_are_le
     plain_residual = np.asarray(hb.residual(z, 0.9, duffing))
     assert np.array_equal(kept_residual, plain_residual) and np.array_equal(loaded_residual, plain_residual)
     assert list(kept.rglob("hb_residual_jit-*.bin"))
+
+
+def test_static_fields_are_described_field_by_field_or_not_kept():
+    """A static field holding frozen dataclasses of hbgear's (the relieved pair's mesh) is in the
+    key field by field, so another relief is another program; anything else is not kept."""
+    from hbgear.build import build_model
+    from hbgear.config import load_config
+    from hbgear.gear.system import GearSystem
+
+    def relieved(tip_relief_um):
+        config = load_config(ROOT / "examples" / "iso_tip_relief.toml",
+                             [f"profile.pinion_tip_relief_um={tip_relief_um}"])
+        return GearSystem(build_model(config))
+
+    structure = {um: persistent._describe_structure(jax.tree_util.tree_structure(relieved(um))) for um in (24.0, 25.0)}
+    assert structure[24.0] != structure[25.0]
+    assert "hbgear.gear.contact.profile.FlankRelief" in repr(structure[24.0])
+
+    @dataclass(frozen=True)
+    class Outside:
+        a: float = 1.0
+
+    @dataclass
+    class Mutable:
+        a: float = 1.0
+
+    for value in (Outside(), [np.ones(2)], {"a": 1}, np.ones(1)):
+        with pytest.raises(persistent._NotCovered):
+            persistent._describe(value)
+    assert persistent._describe((1, 1.0, True)) != persistent._describe((1.0, 1, True))  # types count
+    with pytest.raises(persistent._NotCovered):
+        persistent._describe(Mutable())

@@ -41,13 +41,13 @@ corrector cannot converge across such a jump).
 
 from __future__ import annotations
 
-from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import fourier
+from .persistent import persistent
 from .typed_jit import typed_jit
 
 __all__ = ["MAX_CROSSINGS", "MAX_EXCURSIONS", "SIDE", "breakpoint_instants", "declared", "crossings", "crossings_compiled",
@@ -190,10 +190,14 @@ def crossings(system, p, xc, vc, nu: int, samples: int):
     return t, jnp.concatenate([valid, excursion, excursion], axis=1)
 
 
-@partial(typed_jit, static_argnums=(4, 5))
-def crossings_compiled(system, p, xc, vc, nu: int, samples: int):
-    """:func:`crossings` compiled (the system a pytree argument), for read-outs point by point."""
+def _crossings(system, p, xc, vc, nu: int, samples: int):
     return crossings(system, p, xc, vc, nu, samples)
+
+
+#: :func:`crossings` compiled (the system a pytree argument), for read-outs point by point; its
+#: traced programs kept on disk when a directory is enabled (:mod:`hbgear.engine.persistent`).
+crossings_compiled = persistent(typed_jit(_crossings, static_argnums=(4, 5)), "events-crossings",
+                                "engine.events.crossings", static_argnums=(4, 5))
 
 
 def _sampled_projections(t, harmonics: int, samples: int):

@@ -19,8 +19,9 @@ program is never used:
   leaf's shape, dtype and weak type.
 
 Arguments the fingerprint does not cover -- a node class defined outside hbgear (a user's system:
-its source is not hashed), a static field or argument that is not a plain value, a leaf that is
-not an array or a number -- are never kept: that call is the plain function's. So is every call
+its source is not hashed), a static field or argument that is neither a plain value nor a frozen
+dataclass of hbgear's made of such (described field by field), a leaf that is not an array or a
+number -- are never kept: that call is the plain function's. So is every call
 inside another function's trace, every call when no directory is enabled (the library's
 default; the ``hbgear`` command enables one beside JAX's cache), and a call whose export fails or
 whose kept file does not load (it is then exported again).
@@ -100,12 +101,26 @@ def code_fingerprint(root: str | os.PathLike | None = None) -> str:
     return digest.hexdigest()
 
 
-def _plain(value) -> bool:
+class _NotCovered(Exception):
+    """A value the key cannot describe completely."""
+
+
+def _describe(value):
+    """A complete, plain description of a static value for the key: plain values with their
+    type; tuples and lists item by item; a frozen dataclass of hbgear's field by field (every
+    field, whatever its ``repr``). **Raises** :class:`_NotCovered` for anything else."""
+    import dataclasses
+
     if isinstance(value, _PLAIN_TYPES):
-        return True
-    if isinstance(value, tuple):
-        return all(_plain(v) for v in value)
-    return False
+        return type(value).__name__, value
+    if isinstance(value, (tuple, list)):
+        return type(value).__name__, tuple(_describe(v) for v in value)
+    kind = type(value)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type) and _own_class(kind) \
+            and kind.__dataclass_params__.frozen:
+        return (f"{kind.__module__}.{kind.__qualname__}",
+                tuple((f.name, _describe(getattr(value, f.name))) for f in dataclasses.fields(value)))
+    raise _NotCovered(kind)
 
 
 def _own_class(cls) -> bool:
@@ -113,16 +128,23 @@ def _own_class(cls) -> bool:
     return module in ("builtins", "collections") or module == "hbgear" or module.startswith("hbgear.")
 
 
-def _structure_is_covered(treedef) -> bool:
-    """Every node's class is hbgear's (or a builtin container) and its static fields plain values."""
-    data = treedef.node_data()
-    if data is not None:
-        cls, aux = data
-        if not _own_class(cls):
-            return False
-        if not _plain(tuple(aux) if isinstance(aux, list) else aux):  # a dict's keys come as a list
-            return False
-    return all(_structure_is_covered(child) for child in treedef.children())
+def _describe_structure(treedef) -> tuple:
+    """Every node's class and static fields (:func:`_describe`), depth first. **Raises**
+    :class:`_NotCovered` for a node class from outside hbgear or a static field it cannot describe."""
+    out = []
+
+    def walk(node):
+        data = node.node_data()
+        if data is not None:
+            cls, aux = data
+            if not _own_class(cls):
+                raise _NotCovered(cls)
+            out.append((f"{cls.__module__}.{cls.__qualname__}", _describe(aux)))
+        for child in node.children():
+            walk(child)
+
+    walk(treedef)
+    return tuple(out)
 
 
 _DTYPES: dict = {}  # dtype -> its canonical dtype's string (x64 on or off)
@@ -192,8 +214,9 @@ def persistent(fun, name: str, static_key=(), *, static_argnums=()):
     (any leaf a tracer) it is the plain function.
 
     The returned function has ``for_arguments(*args, **kwargs)``: the function for a loop of
-    calls whose arguments all have the structure, shapes and dtypes of these (a mismatch raises:
-    an exported program checks its arguments), without the per-call lookup."""
+    calls whose arguments all have the structure, shapes and dtypes of these and the same static
+    arguments (a shape mismatch raises: an exported program checks its arguments; the static
+    arguments of the calls are not looked at), without the per-call lookup."""
     static = (static_argnums,) if isinstance(static_argnums, int) else tuple(static_argnums)
     programs: dict = {}  # (static values, tree structure, node classes, avals) -> _Program, or None
 
@@ -216,12 +239,14 @@ def persistent(fun, name: str, static_key=(), *, static_argnums=()):
             pass
         except TypeError:  # an unhashable static value: never kept
             return None, leaves
-        program = None
-        if all(_static_is_covered(v) for v in static_values):
-            program = _program(_with_static(fun, static, static_values), name, (static_key, static_values),
-                               (dynamic, kwargs), leaves, tree, avals, _STATE["directory"])
-        else:
+        try:
+            static_description = _describe(static_values)
+        except _NotCovered:
+            program = None
             _STATS["plain"] += 1
+        else:
+            program = _program(_with_static(fun, static, static_values), name, (static_key, static_description),
+                               (dynamic, kwargs), leaves, tree, avals, _STATE["directory"])
         programs[signature] = program
         return program, leaves
 
@@ -273,28 +298,20 @@ def _with_static(fun, static: tuple, static_values: tuple):
     return dynamic_only
 
 
-def _static_is_covered(value) -> bool:
-    """A plain value, or a frozen dataclass of hbgear's whose fields are plain values (its ``repr``
-    then says all of it)."""
-    import dataclasses
-
-    if _plain(value):
-        return True
-    if dataclasses.is_dataclass(value) and _own_class(type(value)) and type(value).__dataclass_params__.frozen:
-        return all(f.repr and _plain(getattr(value, f.name)) for f in dataclasses.fields(value))
-    return False
-
-
 def _program(fun, name, static_key, arguments, leaves, tree, avals, directory) -> _Program | None:
     """The kept program for these arguments (``(dynamic args, kwargs)``, flattened to `leaves` of
     structure `tree`): loaded, or exported and written; ``None`` when they cannot be kept (module
     docstring) or exporting fails."""
-    if any(a is None for a in avals) or not _structure_is_covered(tree):
+    try:
+        if any(a is None for a in avals):
+            raise _NotCovered("leaf")
+        structure = _describe_structure(tree)
+    except _NotCovered:
         _STATS["plain"] += 1
         return None
     types = [f"{t.__module__}.{t.__qualname__}" for t in node_types(arguments)]
     fingerprint = code_fingerprint()
-    key = hashlib.sha256(repr((fingerprint, name, repr(static_key), str(tree), types, avals)).encode())
+    key = hashlib.sha256(repr((fingerprint, name, repr(static_key), str(tree), structure, types, avals)).encode())
     path = Path(directory) / fingerprint[:FINGERPRINT_CHARS] / f"{name}-{key.hexdigest()[:40]}.bin"
     if path in _PROGRAMS:
         return _PROGRAMS[path]

@@ -175,11 +175,14 @@ def _event_split_summaries(model, omegas, coefficients, harmonics, nu, u_static,
     phases = np.asarray(model.phase_breakpoints(), dtype=float)
     fixed = np.concatenate([(phases + j) / nu for j in range(nu)])
     rows = []
-    for omega, xc, u_s, r in zip(omegas, np.asarray(coefficients, dtype=float), u_static, reaction):
+    coefficients = np.asarray(coefficients, dtype=float)
+    located = None  # the compiled crossings, looked up once for the loop (every point's arguments alike)
+    for omega, xc, u_s, r in zip(omegas, coefficients, u_static, reaction):
         base_frequency = float(model.speeds(float(omega))[2]) / nu
         vc = xc @ fourier.derivative_matrix(harmonics, base_frequency).T
-        t, valid = (np.asarray(a) for a in crossings_compiled(system, float(omega), xc, vc,
-                                                               nu, samples))
+        if located is None:
+            located = crossings_compiled.for_arguments(system, float(omega), xc, vc, nu, samples)
+        t, valid = (np.asarray(a) for a in located(system, float(omega), xc, vc, nu, samples))
         base, w = mesh_period_rule(np.concatenate([fixed, t[valid]]), 2 * harmonics + 8)
         tau = 2 * np.pi * np.outer(np.arange(1, harmonics + 1), base)
         q, qd = _synthesize(xc, base_frequency, np.cos(tau), np.sin(tau))
