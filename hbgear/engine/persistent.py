@@ -40,14 +40,14 @@ import numpy as np
 
 from .typed_jit import node_types
 
-__all__ = ["code_fingerprint", "disable", "enable", "enabled_directory", "persistent", "stats"]
+__all__ = ["code_fingerprint", "disable", "enable", "persistent", "stats"]
 
 #: Programs of one code fingerprint go to a folder named by its first characters.
 FINGERPRINT_CHARS = 16
 #: Folders of other fingerprints kept (the most recently used); older ones are removed.
 KEEP_OTHER_VERSIONS = 3
 
-_STATE = {"directory": None, "fingerprint": None, "pruned": False}
+_STATE = {"directory": None, "fingerprint": None, "pruned": False, "touched": False}
 #: What this process did: programs exported and written, read back, and calls left to the plain function.
 _STATS = {"exported": 0, "loaded": 0, "plain": 0}
 _PLAIN_TYPES = (str, int, float, bool, complex, bytes, type(None))
@@ -62,10 +62,6 @@ def enable(directory: str | os.PathLike) -> Path:
 
 def disable() -> None:
     _STATE["directory"] = None
-
-
-def enabled_directory() -> Path | None:
-    return _STATE["directory"]
 
 
 def stats() -> dict:
@@ -246,7 +242,7 @@ def persistent(fun, name: str, static_key=(), *, static_argnums=()):
             _STATS["plain"] += 1
         else:
             program = _program(_with_static(fun, static, static_values), name, (static_key, static_description),
-                               (dynamic, kwargs), leaves, tree, avals, _STATE["directory"])
+                               tree, avals, _STATE["directory"])
         programs[signature] = program
         return program, leaves
 
@@ -298,9 +294,9 @@ def _with_static(fun, static: tuple, static_values: tuple):
     return dynamic_only
 
 
-def _program(fun, name, static_key, arguments, leaves, tree, avals, directory) -> _Program | None:
-    """The kept program for these arguments (``(dynamic args, kwargs)``, flattened to `leaves` of
-    structure `tree`): loaded, or exported and written; ``None`` when they cannot be kept (module
+def _program(fun, name, static_key, tree, avals, directory) -> _Program | None:
+    """The kept program for arguments (``(dynamic args, kwargs)``) of structure `tree` and leaves
+    of `avals`: loaded, or exported and written; ``None`` when they cannot be kept (module
     docstring) or exporting fails."""
     try:
         if any(a is None for a in avals):
@@ -309,9 +305,8 @@ def _program(fun, name, static_key, arguments, leaves, tree, avals, directory) -
     except _NotCovered:
         _STATS["plain"] += 1
         return None
-    types = [f"{t.__module__}.{t.__qualname__}" for t in node_types(arguments)]
-    fingerprint = code_fingerprint()
-    key = hashlib.sha256(repr((fingerprint, name, repr(static_key), str(tree), structure, types, avals)).encode())
+    fingerprint = code_fingerprint()  # `structure` names every node's class (what typed_jit keys on)
+    key = hashlib.sha256(repr((fingerprint, name, repr(static_key), str(tree), structure, avals)).encode())
     path = Path(directory) / fingerprint[:FINGERPRINT_CHARS] / f"{name}-{key.hexdigest()[:40]}.bin"
     if path in _PROGRAMS:
         return _PROGRAMS[path]
@@ -354,7 +349,7 @@ def _load_or_export(fun, path: Path, tree, avals) -> _Program | None:
 
 def _touch(folder: Path) -> None:
     """Mark a fingerprint's folder used (its time orders :func:`_prune`); once per process."""
-    if not _STATE.get("touched"):
+    if not _STATE["touched"]:
         _STATE["touched"] = True
         try:
             os.utime(folder)
@@ -365,7 +360,7 @@ def _touch(folder: Path) -> None:
 def _prune(current: Path) -> None:
     """Remove the folders of other code fingerprints (other hbgear or jax versions, edited
     sources) but the :data:`KEEP_OTHER_VERSIONS` most recently used; once per process."""
-    if _STATE.get("pruned"):
+    if _STATE["pruned"]:
         return
     _STATE["pruned"] = True
     import shutil
