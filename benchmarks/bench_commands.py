@@ -67,6 +67,16 @@ def _import_jax(env) -> float:
     return _wall(["-c", "import jax"], env)
 
 
+def _ml_dtypes_import(env) -> tuple[str, float]:
+    """The installed ``ml_dtypes`` (JAX's dtypes) and the seconds its import takes after numpy's:
+    0.7.0 took 0.7 s of a 1.3 s ``import jax`` on this project's machine (pyproject excludes it)."""
+    code = ("import time, numpy; t = time.perf_counter(); import ml_dtypes; "
+            "print(ml_dtypes.__version__, time.perf_counter() - t)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=ROOT, check=True, capture_output=True, text=True)
+    version, seconds = out.stdout.split()
+    return version, float(seconds)
+
+
 def _ti_points(model, speeds_rpm):
     """Per speed: wall time [s] of the integration to steady state and its response."""
     from hbgear.gear.simulate import simulate
@@ -178,7 +188,7 @@ def ltv_command(quick=False) -> dict:
         "ratio": statistics.median(w / j for w, j in zip(warm, jax_times)), "ratios": [w / j for w, j in zip(warm, jax_times)],
         "cold_s": statistics.median(cold), "cold_ratio": statistics.median(c / j for c, j in zip(cold, cold_jax)),
         "cold_ratios": [c / j for c, j in zip(cold, cold_jax)], "max_residual": record["max_residual"],
-        "tolerance": record["tolerance"], "stages_s": record["timings_s"],
+        "tolerance": record["tolerance"], "stages_s": record["timings_s"], "ml_dtypes": _ml_dtypes_import(env),
     }
 
 
@@ -217,7 +227,7 @@ def table(res) -> str:
         f"LTV frc, {lt['points']} points: {lt['wall_s']:.2f} s warm, import jax {lt['import_jax_s']:.2f} s: "
         f"{lt['ratio']:.2f}x (pairs " + ", ".join(f"{r:.2f}" for r in lt["ratios"]) + f"); first run, empty cache "
         f"{lt['cold_s']:.2f} s: {lt['cold_ratio']:.2f}x; max residual {lt['max_residual']:.1e} (tolerance "
-        f"{lt['tolerance']:.0e})",
+        f"{lt['tolerance']:.0e}); of import jax, ml_dtypes {lt['ml_dtypes'][0]} {lt['ml_dtypes'][1]:.2f} s",
         f"hbgear --help {hp['wall_s']:.3f} s, import jax {hp['import_jax_s']:.2f} s: {hp['ratio']:.2f}x",
     ]
     return "\n".join(lines)
