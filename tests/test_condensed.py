@@ -20,7 +20,7 @@ from hbgear.engine.system import PeriodicSystem
 from hbgear.engine.condensed import as_matrix, check_input_map, lu_factor, lu_solve
 from hbgear.engine.continuation import continuation, sweep_method
 from hbgear.engine.hb import HarmonicBalance, residual_functions
-from hbgear.engine.response import _sized_functions_of, arclength_sizes
+from hbgear.engine.metric import arclength_sizes, sized_functions_of as _sized_functions_of
 from hbgear.engine.system import check_system
 from hbgear.gear.solve import rpm_to_rad_s
 from hbgear.gear.system import GearSystem

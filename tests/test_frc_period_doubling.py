@@ -193,3 +193,49 @@ def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch
     monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3, None))
     monkeypatch.setattr(frc_command, "_exact_bracket", failing)
     assert locate()[0] == pytest.approx(exact, rel=2e-7)
+
+
+def test_nu2_branch_on_the_soft_spring_counts_its_mean_in_the_springs_units(monkeypatch):
+    """On the soft output spring with formulation B friction the spring's mean wind-up follows
+    the response ``spring_stiffness_ratio`` (5e5) times more than the mesh; the ``nu = 2`` branch
+    is continued in the curve's metric (:func:`hbgear.engine.metric.arclength_sizes`), so it does
+    not crawl: the backlash pair (Coulomb 0.05, H = 8, N = 256), its crossing near 28,230 rpm,
+    reached 27,000 rpm in 34 points against 438 in plain unknowns (the relieved ISO pair's two
+    branches: 55 points against 2355, its command 57 s against 245 s). Only the metric changes:
+    the sized branch's points lie on the plain one, and both end at the range end."""
+    import hbgear.engine.bifurcation as bf
+    from hbgear.gear.system import GearSystem
+
+    model = build_model(load_config(EXAMPLE, ["friction.law='coulomb'", "friction.mu0=0.05",
+                                              "friction.formulation='B'"]))
+    system = GearSystem(model)
+    assert not model.is_linear and system.arclength_mean_scales(1.0) is not None
+    hb = bf.HarmonicBalance(system.ndof, 8, 1, 256)
+    pa, pb = rpm_to_rad_s(28300.0), rpm_to_rad_s(28150.0)
+
+    def solve(p, z0=None):
+        return np.asarray(solve_periodic(model, float(p), harmonics=8, samples=256, z0=z0).z)
+
+    (point, why), = bf.locate_period_doublings(system, hb, solve, [(pa, solve(pa), pb, solve(pb))])
+    assert point is not None, why
+    assert abs(point.p - rpm_to_rad_s(28231.1)) < 1e-4 * point.p
+    lo, hi = rpm_to_rad_s(27000.0), rpm_to_rad_s(29000.0)
+
+    def follow():
+        return bf.follow_period_doubled(system, point, 8, lo, hi, harmonics2=16, samples2=512, max_points=1000)
+
+    sized = follow()
+    monkeypatch.setattr(bf, "arclength_sizes", lambda *args: None)  # the plain unknowns
+    plain = follow()
+    assert sized.status == plain.status == "reached range end"
+    assert sized.p[-1] == pytest.approx(lo, rel=1e-12) and plain.p[-1] == pytest.approx(lo, rel=1e-12)
+    assert len(sized.p) < len(plain.p) / 5, (len(sized.p), len(plain.p))
+    # every sized point on the plain branch: within one plain step of the nearest plain solution
+    # (the plain points are dense; the branch turns in speed near the crossing), the ends equal
+    span = np.max(np.abs(plain.z))
+    assert np.max(np.abs(sized.z[-1] - plain.z[-1])) <= 1e-7 * span
+    steps = np.max(np.abs(np.diff(plain.z, axis=0)), axis=1)
+    for z in sized.z[1:-1]:
+        gaps = np.max(np.abs(plain.z - z), axis=1)
+        k = int(np.argmin(gaps))
+        assert gaps[k] <= steps[max(k - 1, 0):k + 1].max(), (k, gaps[k])

@@ -21,6 +21,7 @@ orders), and the Floquet eigenfunction of the multiplier -1 is the null vector o
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -28,7 +29,8 @@ import numpy as np
 from .arrays import device_array
 from .continuation import PseudoArclength, Status, continuation, illinois, sweep_method
 from .floquet import hill_exponents_along, hill_follower, most_negative_real
-from .hb import HarmonicBalance, residual_functions
+from .hb import HarmonicBalance
+from .metric import arclength_sizes, continuation_functions
 from .monodromy import monodromy_variational, multipliers_linear, state_synthesis
 
 __all__ = [
@@ -114,24 +116,29 @@ def half_order_mode(hb2: HarmonicBalance, z2, p: float, system) -> tuple[np.ndar
     return phi, float(s[-1] / s[0])
 
 
-def amplitude_residuals(hb2, system, p_star: float, phi, offset: float):
+def amplitude_residuals(hb2, system, p_star: float, phi, offset: float, sizes=None):
     """Residuals for continuing a ``nu = 2`` branch in its half-order amplitude ``a``.
 
-    Unknowns ``y = (z, p / p_star)``; equations ``R(z; p) = 0`` and ``phi . z - offset = a``.
+    Unknowns ``y = (z / sizes, p / p_star)`` (`sizes`: :func:`~hbgear.engine.metric.arclength_sizes`
+    of `hb2`, ``None`` for all 1); equations ``R(z; p) = 0`` and ``phi . z - offset = a``.
     **Returns:** ``(both, resid)``: ``(y, a) -> (R, dR/dy, dR/da)`` and ``(y, a) -> R``.
     """
+    scale = np.ones(hb2.size) if sizes is None else np.asarray(sizes, dtype=float)
+    phi_y = np.asarray(phi, dtype=float) * scale  # d(phi . z)/d(z / sizes)
 
     def both(y, a):
-        r, jz, jp = hb2.residual_and_jacobians(device_array(y[:-1]), float(y[-1] * p_star), system)
-        r = np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
-        top = np.hstack([np.asarray(jz, dtype=float), p_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
+        z = y[:-1] * scale
+        r, jz, jp = hb2.residual_and_jacobians(device_array(z), float(y[-1] * p_star), system)
+        r = np.append(np.asarray(r, dtype=float), phi @ z - offset - a)
+        top = np.hstack([np.asarray(jz, dtype=float) * scale[None, :], p_star * np.asarray(jp, dtype=float).reshape(-1, 1)])
         jpar = np.zeros(len(r))
         jpar[-1] = -1.0
-        return r, np.vstack([top, np.append(phi, 0.0)]), jpar
+        return r, np.vstack([top, np.append(phi_y, 0.0)]), jpar
 
     def resid(y, a):
-        r = hb2.residual(device_array(y[:-1]), float(y[-1] * p_star), system)
-        return np.append(np.asarray(r, dtype=float), phi @ y[:-1] - offset - a)
+        z = y[:-1] * scale
+        r = hb2.residual(device_array(z), float(y[-1] * p_star), system)
+        return np.append(np.asarray(r, dtype=float), phi @ z - offset - a)
 
     return both, resid
 
@@ -410,10 +417,14 @@ class DoubledBranch(NamedTuple):
 
 
 def _end_leg(hb2, system, z, p, end, p_star, tolerance, max_points):
-    """The arclength leg in the parameter from ``(p, z)`` that stops exactly at `end`."""
-    both, resid, fixed = residual_functions(hb2, system)
-    return continuation(both, resid, z, float(p), end, sweep_method(p_star, end), max_points=max_points,
-                        tolerance=tolerance, args=fixed)
+    """The arclength leg in the parameter from ``(p, z)`` that stops exactly at `end` (in the
+    metric of :func:`~hbgear.engine.metric.continuation_functions`; ``z`` of the result in
+    `hb2`'s unknowns)."""
+    both, resid, fixed, sizes = continuation_functions(hb2, system, p_star)
+    y = np.asarray(z, dtype=float) if sizes is None else np.asarray(z, dtype=float) / sizes
+    leg = continuation(both, resid, y, float(p), end, sweep_method(p_star, end), max_points=max_points,
+                       tolerance=tolerance, args=fixed)
+    return leg if sizes is None else replace(leg, z=np.asarray(leg.z) * sizes)
 
 
 def follow_period_doubled(system, point: PeriodDoublingPoint, harmonics: int, p_lo: float, p_hi: float, *,
@@ -440,13 +451,15 @@ def follow_period_doubled(system, point: PeriodDoublingPoint, harmonics: int, p_
     p_star = float(point.p)
     phi, _ = half_order_mode(hb2, z_star, p_star, system)
     offset = float(phi @ z_star)
-    both, resid = amplitude_residuals(hb2, system, p_star, phi, offset)
+    sizes = arclength_sizes(hb2, system, p_star)  # the curve's metric: a soft mean does not fill the arclength
+    scale = np.ones(hb2.size) if sizes is None else sizes
+    both, resid = amplitude_residuals(hb2, system, p_star, phi, offset, sizes)
     method = PseudoArclength(ds=0.02, ds_min=1e-8, ds_max=0.25, max_angle_deg=5.0, parameter_scale=max_amplitude)
-    leg = continuation(both, resid, np.append(z_star + amplitude * phi, 1.0), amplitude, max_amplitude, method,
-                       max_points=max_points, tolerance=tolerance, progress=progress,
+    leg = continuation(both, resid, np.append((z_star + amplitude * phi) / scale, 1.0), amplitude, max_amplitude,
+                       method, max_points=max_points, tolerance=tolerance, progress=progress,
                        callback=lambda a, y: not p_lo <= float(y[-1]) * p_star <= p_hi)
     ps = np.asarray(leg.z)[:, -1] * p_star if len(leg) else np.zeros(0)
-    zs = np.asarray(leg.z)[:, :-1] if len(leg) else np.zeros((0, hb2.size))
+    zs = np.asarray(leg.z)[:, :-1] * scale if len(leg) else np.zeros((0, hb2.size))
     res = np.asarray(leg.residual)
 
     def result(ps, zs, res, status, message):

@@ -232,7 +232,7 @@ class PortJacobian(NamedTuple):
     def scaled(self, sizes) -> PortJacobian:
         """``J diag(sizes)`` (`sizes` ``(n B,)``, positive): the columns of ``A``'s blocks and
         their inverses' rows, and the mask of ``V^T`` (the continuation in the unknowns
-        ``z / sizes``: :func:`hbgear.engine.response.arclength_sizes`)."""
+        ``z / sizes``: :func:`hbgear.engine.metric.arclength_sizes`)."""
         n, h, b = self._dims
         sc = sizes.reshape(n, b)
         s0 = sc[:, 0]

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from functools import cached_property, lru_cache
+from functools import cached_property
 
-import jax.numpy as jnp
 import numpy as np
 
 from ..errors import ConvergenceError
@@ -25,7 +24,8 @@ from .arrays import device_array
 from .bifurcation import DoubledBranch, PeriodDoublingPoint, follow_period_doubled, locate_period_doublings
 from .continuation import Branch, Status, continuation, solve_at_parameter, sweep_method
 from .floquet import hill_multipliers, period_doubling
-from .hb import HarmonicBalance, residual_functions
+from .hb import HarmonicBalance
+from .metric import continuation_functions
 from .newton import NewtonResult, newton
 from .prefetch import import_in_background
 from .stability import BranchStability, branch_stability, unstable_zones
@@ -286,7 +286,7 @@ class FrequencyResponse:
 def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, step, progress, start):
     """The branch from `p0` to `p1`: Newton from `z0` in the compiled corrector; on a failed start
     the `start` callable (``p -> z``, e.g. a staged solve) gives a converged start point."""
-    rj, r, fixed, sizes = _continuation_functions(hb, system, p0)
+    rj, r, fixed, sizes = continuation_functions(hb, system, p0)
     method = sweep_method(p0, p1, step)
 
     def run(z, iterations):
@@ -304,67 +304,17 @@ def _follow(system, hb, p0, p1, z0, *, tolerance, max_points, max_iterations, st
     return run(start(p0), 10)
 
 
-def _continuation_functions(hb: HarmonicBalance, system, p):
-    """``(residual_and_jacobians, residual, args, sizes)`` that :func:`_follow` continues: the
-    residual functions of `hb`, or with :func:`arclength_sizes` at `p` those in the unknowns
-    ``y = z / sizes`` (`sizes` the last argument; ``None`` when there are none)."""
-    rj, r, fixed = residual_functions(hb, system)
-    sizes = arclength_sizes(hb, system, p)
-    if sizes is not None:  # the continuation's unknowns z / sizes, its residual R(sizes y)
-        rj, r = _sized_functions_of(hb)
-        fixed = (*fixed, sizes)
-    return rj, r, fixed, sizes
-
-
 def corrector_solve(hb: HarmonicBalance, system, p: float, z0, *, tolerance: float = 1e-9,
                     max_iterations: int = 50, sizes_at=None) -> NewtonResult:
     """The solution at `p` by the compiled corrector of a curve of `system` (the program its
     continuation compiled: :func:`~hbgear.engine.continuation.solve_at_parameter`), in the unknowns
     of that curve (:func:`arclength_sizes` at `sizes_at`, default `p`: pass the curve's start to
     share its program); ``z`` of the result in `hb`'s unknowns."""
-    rj, r, fixed, sizes = _continuation_functions(hb, system, p if sizes_at is None else sizes_at)
+    rj, r, fixed, sizes = continuation_functions(hb, system, p if sizes_at is None else sizes_at)
     z0 = np.asarray(z0, dtype=float)
     result = solve_at_parameter(rj, r, z0 if sizes is None else z0 / sizes, float(p), args=fixed, tolerance=tolerance,
                                 max_iterations=max_iterations)
     return result if sizes is None else result._replace(z=np.asarray(result.z) * sizes)
-
-
-def arclength_sizes(hb: HarmonicBalance, system, p) -> np.ndarray | None:
-    """The system's :meth:`~hbgear.engine.system.PeriodicSystem.arclength_mean_scales` at `p` as
-    sizes of the unknowns of `hb` ``(size,)`` (the means' slots; 1 elsewhere), or ``None`` when
-    it declares none or all are 1."""
-    declared = getattr(system, "arclength_mean_scales", None)  # duck-typed systems may lack it
-    scales = None if declared is None else declared(p)
-    if scales is None:
-        return None
-    scales = np.asarray(scales, dtype=float).reshape(hb.ndof)
-    if not np.all(np.isfinite(scales) & (scales > 0)):
-        raise ValueError(f"{type(system).__name__}.arclength_mean_scales: positive finite numbers, got {scales}")
-    if np.all(scales == 1.0):
-        return None
-    sizes = np.ones(hb.size)
-    sizes[np.arange(hb.ndof) * hb.block] = scales
-    return sizes
-
-
-@lru_cache(maxsize=16)
-def _sized_functions_of(hb: HarmonicBalance):
-    """:func:`~hbgear.engine.hb.residual_functions` in the unknowns ``y = z / sizes`` (`sizes`
-    the last extra argument): ``R(sizes y)`` and its Jacobian ``R_z diag(sizes)``."""
-    def residual_and_jacobians(y, p, system, prepared, sizes):
-        if prepared.condensed is not None:  # a PortJacobian (hbgear.engine.condensed): its scaled form
-            res, jz, jp = hb.residual_and_port_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
-            return res, jz.scaled(jnp.asarray(sizes)), jp
-        res, jz, jp = hb.residual_and_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
-        return res, jz * sizes[None, :], jp
-
-    def residual(y, p, system, prepared, sizes):
-        return hb.residual(jnp.asarray(y) * sizes, p, system, prepared)
-
-    residual_and_jacobians.jacobian_is_structured = lambda system, prepared, sizes: prepared.condensed is not None
-    # all they close over is `hb` (frozen settings): programs traced from them may be kept on disk
-    residual_and_jacobians.program_key = residual.program_key = ("engine.response._sized_functions_of", hb)
-    return residual_and_jacobians, residual
 
 
 def _period_doubling_candidates(multipliers) -> tuple[list[int], np.ndarray]:
