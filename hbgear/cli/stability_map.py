@@ -22,13 +22,13 @@ import argparse
 import math
 import sys
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from . import Command, register
 from ..errors import ConfigError
-from ..outputs.io import to_jsonable, write_csv_atomic
-from ..tasks import Journal, fingerprint, run_tasks
+
+if TYPE_CHECKING:  # numpy is imported where it is used: --help and bad input answer without it
+    import numpy as np
 
 __all__ = ["STABILITY_MAP", "compute_row", "grid", "run_map"]
 
@@ -37,6 +37,8 @@ PARTIAL = "stability.partial.csv"
 
 def grid(config) -> tuple[np.ndarray, np.ndarray]:
     """``(speeds_rpm, contact_ratios)`` of ``[map]``."""
+    import numpy as np
+
     m = config.map
     speeds = np.linspace(m.speed_rpm_start, m.speed_rpm_stop, int(m.speed_steps))
     ratios = np.linspace(m.contact_ratio_start, m.contact_ratio_stop, int(m.contact_ratio_steps))
@@ -45,6 +47,8 @@ def grid(config) -> tuple[np.ndarray, np.ndarray]:
 
 def compute_row(config, contact_ratio: float, speeds_rpm) -> np.ndarray:
     """max |multiplier| at every speed for one contact ratio (the task sent to workers)."""
+    import numpy as np
+
     from ..build import model_at_contact_ratio
     from ..gear.maps import stability_row
 
@@ -59,6 +63,9 @@ def compute_row(config, contact_ratio: float, speeds_rpm) -> np.ndarray:
 
 
 def _fingerprint(config, speeds, ratios) -> str:
+    from ..outputs.io import to_jsonable
+    from ..tasks import fingerprint
+
     data = to_jsonable(config.to_dict())
     data.get("map", {}).pop("scheduler", None)
     data["grid"] = {"speeds_rpm": [repr(float(s)) for s in speeds], "contact_ratios": [repr(float(g)) for g in ratios]}
@@ -82,6 +89,8 @@ class _RowCodec:
         return _row_lines(self.ratios[i], self.speeds, values)
 
     def decode(self, lines) -> dict[int, np.ndarray]:
+        import numpy as np
+
         index = {float(g): i for i, g in enumerate(self.ratios)}
         column = {float(s): k for k, s in enumerate(self.speeds)}
         found: dict[int, dict[int, float]] = {}
@@ -108,6 +117,11 @@ def run_map(config, out_dir: Path, *, scheduler: str | None = None, fresh: bool 
     **Returns:** ``(speeds_rpm, contact_ratios, values)`` with values of shape
     ``(len(contact_ratios), len(speeds_rpm))``.
     """
+    import numpy as np
+
+    from ..outputs.io import write_csv_atomic
+    from ..tasks import Journal, run_tasks
+
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     speeds, ratios = grid(config)
@@ -170,6 +184,8 @@ def _validate(config, args) -> None:
 
 
 def _run(config, args, out_dir: Path) -> int:
+    import numpy as np
+
     speeds, ratios, values = run_map(
         config, out_dir, scheduler=_scheduler(config, args), fresh=args.fresh, progress=not args.no_progress
     )
