@@ -226,6 +226,35 @@ def test_variational_monodromy_batch_equals_the_members_alone():
         monodromy_variational(TwoGeometries(m), omegas[:2], lambda tau: (np.zeros((2, 2)), np.zeros((2, 2))))
 
 
+def test_branch_stability_beyond_hills_size_takes_the_variational_equations(monkeypatch):
+    """Hill's matrices larger than ``HILL_MAX_SIZE`` square: the branch's multipliers come from
+    the variational equations (the NLTV pair at 200 rpm, H = 512: Hill took 84 s a point there
+    and returned a spurious third multiplier). Checked on an NLTV arctan branch at H = 32, N = 1024
+    (Hill's size 130) with the limit lowered below it: the same multipliers as Hill's to within
+    1e-4 (3.6e-5 measured; 3.6e-3 at N = 256, where Hill's matrices alias the friction's sign
+    change; the two routes share no code but the harmonic-balance solutions), the same verdicts,
+    the method named; with the limit as shipped, Hill is used."""
+    from hbgear.engine import stability
+    from hbgear.gear.solve import solve_periodic
+
+    m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
+    system = GearSystem(m)
+    hb = HarmonicBalance(m.ndof, 32, 1, 1024)
+    omegas = np.array([5200.0, 5300.0, 5400.0, 8700.0]) / RPM  # in and out of two period-doubling zones
+    zs = np.stack([solve_periodic(m, w, harmonics=32, samples=1024).z for w in omegas])
+    hill = stability.branch_stability(hb, system, omegas, zs, progress=False)
+    assert stability.uses_hill(hb) and hill.method.startswith("Hill's method")
+    monkeypatch.setattr(stability, "HILL_MAX_SIZE", hb.size - 1)
+    assert not stability.uses_hill(hb)
+    exact = stability.branch_stability(hb, system, omegas, zs, progress=False)
+    assert exact.method.startswith("the variational equations") and "130 > 129" in exact.method
+    assert exact.warning is None
+    for a, b in zip(hill.multipliers, exact.multipliers):
+        assert max_pair_distance(a, b) < 1e-4, (a, b)
+    np.testing.assert_array_equal(hill.stable, exact.stable)
+    assert list(exact.stable) == [1.0, 0.0, 1.0, 0.0]
+
+
 # ----------------------------------------------------------------------------- tongues
 
 

@@ -32,6 +32,7 @@ from .floquet import hill_exponents_along, hill_follower, most_negative_real
 from .hb import HarmonicBalance
 from .metric import arclength_sizes, continuation_functions
 from .monodromy import monodromy_variational, multipliers_linear, state_synthesis
+from .stability import uses_hill
 
 __all__ = [
     "PeriodDoublingPoint",
@@ -270,7 +271,8 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
     (started from the straight line between the two points, so it stays on this branch even where
     the curve is multivalued; for a linear system, whose multipliers do not depend on the solution,
     only at the crossing found). Where the multiplier needs the variational equations (a batch of
-    them costs about one) the crossing of Hill's multipliers (cheap) is located first, to
+    them costs about one) the crossing of Hill's multipliers (cheap while its matrices are at
+    most :data:`~hbgear.engine.stability.HILL_MAX_SIZE` square) is located first, to
     :data:`HILL_TOLERANCE`; the exact multipliers there (one batch for all segments) and Hill's
     slope predict each exact crossing, and the exact multipliers on either side of it,
     :data:`PREDICTED_HALF_WIDTH` tolerances away (a second batch), confirm it when they differ in
@@ -296,7 +298,7 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
 
     out: list = [None] * len(segments)
     hills: dict = {}
-    if system.linearization() is None:
+    if system.linearization() is None and uses_hill(hb):  # (large Hill problems: the exact multipliers alone)
         for k, (pa, _, pb, _) in enumerate(segments):
             hill = _hill_crossing(system, hb, on_segment(k), pa, pb, HILL_TOLERANCE, max_steps)
             if hill is not None:

@@ -7,7 +7,13 @@ At each point the multipliers come from the cheapest exact route that applies:
   along the solution (a linear system everywhere; e.g. the gear pair with backlash where the
   teeth keep contact);
 - **Hill's method** elsewhere, along each run of neighbouring points with every point seeded
-  from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`).
+  from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`), while its matrices
+  are at most :data:`HILL_MAX_SIZE` square;
+- **the variational equations** (:func:`hbgear.engine.monodromy.monodromy_variational`, batches
+  of :data:`VARIATIONAL_POINTS` points integrated together) for larger ones: Hill's eigenproblems
+  grow as ``(n (2H+1))^3`` and its selection of the central exponents among ``2H+1`` copies
+  gets less reliable, while the integration of the ``2n x 2n`` monodromy costs about the same
+  at any ``H``.
 
 Multipliers are over the base period of the discretisation (``nu`` excitation periods). A batch
 that fails is redone point by point, so one bad point costs only itself (``None``).
@@ -23,11 +29,21 @@ import numpy as np
 from .floquet import hill_exponents_along, hill_follower, hill_multipliers, stable_verdicts
 
 __all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
-           "ZONE_SCAN_SUBDIVISIONS"]
+           "HILL_MAX_SIZE", "VARIATIONAL_POINTS", "ZONE_SCAN_SUBDIVISIONS", "uses_hill"]
 
 #: Points per call of :func:`~hbgear.engine.floquet.hill_exponents_along` (the progress bar
 #: steps by this; a batch that fails is redone point by point).
 HILL_BATCH = 128
+
+#: Largest Hill matrix (``hb.size = n (2H+1)``) for which a branch's multipliers come from Hill's
+#: method; beyond it from the variational equations. On the NLTV pair at 200 rpm (n = 2, H = 512,
+#: size 2050) Hill took 84 s a point and returned three multipliers at 0.97836 where the
+#: variational monodromy (DOP853, rtol 1e-10) has two and two at 2.5e-12; a batch of six points
+#: of the variational equations took 5.9 s. Every bundled example is below it (130-390).
+HILL_MAX_SIZE = 512
+
+#: Points per batched integration of the variational equations (:data:`HILL_MAX_SIZE`).
+VARIATIONAL_POINTS = 64
 
 #: Sub-intervals per branch step of the exact scan for unstable zones (:func:`unstable_zones`).
 ZONE_SCAN_SUBDIVISIONS = 6
@@ -94,6 +110,44 @@ def _hill_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[
     return failures
 
 
+def uses_hill(hb) -> bool:
+    """Whether a branch discretised by `hb` takes Hill's method where no exact route applies
+    (its matrices at most :data:`HILL_MAX_SIZE` square), else the variational equations."""
+    return hb.size <= HILL_MAX_SIZE
+
+
+def _variational_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[str]:
+    """Multipliers over the base period from the variational equations along the solutions at the
+    points `indices`, :data:`VARIATIONAL_POINTS` of them per integration, into ``out[i]``; a
+    failing batch is redone point by point. **Returns:** the failure messages."""
+    from .monodromy import monodromy_variational, state_synthesis
+
+    def multipliers(rows):
+        coefficients = np.stack([hb.decode(system, zs[i])[0] for i in rows])
+        base = np.array([float(hb.base_frequency(system, ps[i])) for i in rows])
+        phi = monodromy_variational(system, ps[rows], state_synthesis(coefficients, hb.harmonics, base), hb.nu)
+        return np.linalg.eigvals(phi)
+
+    failures = []
+    bar = _progress(len(indices), label, progress)
+    for lo in range(0, len(indices), VARIATIONAL_POINTS):
+        batch = list(indices[lo:lo + VARIATIONAL_POINTS])
+        try:
+            for i, m in zip(batch, multipliers(batch)):
+                out[i] = np.asarray(m)
+        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+            for i in batch:
+                try:
+                    out[i] = np.asarray(multipliers([i])[0])
+                except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
+                    failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
+        if bar is not None:
+            bar.update(len(batch))
+    if bar is not None:
+        bar.close()
+    return failures
+
+
 def exact_batch_size(system) -> int:
     """Parameter values per batched exact-monodromy evaluation: 4096 at ``2n = 4`` states, fewer
     for more (``65536 / (2n)^2``, at least 256), so a batch's Magnus steps stay ~tens of MB. Each
@@ -136,9 +190,14 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
         except Exception as exc:  # noqa: BLE001 -- Hill instead
             fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
             hill, exact = sorted(hill + exact), []
-    failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label)
+    if uses_hill(hb):
+        failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label)
+        hill_text = "Hill's method (hbgear.engine.floquet.hill_exponents_along)"
+    else:
+        failures = _variational_in_batches(hb, system, ps, zs, hill, out, progress, label)
+        hill_text = (f"the variational equations (hbgear.engine.monodromy.monodromy_variational; Hill's matrices "
+                     f"would be {hb.size} > {HILL_MAX_SIZE} square)")
     exact_text = "exact monodromy (hbgear.engine.monodromy.multipliers_linear)"
-    hill_text = "Hill's method (hbgear.engine.floquet.hill_exponents_along)"
     if not hill:
         method = exact_text
     elif not exact:
