@@ -24,6 +24,10 @@
   damping (the same day): 562-817 s in three runs, against 1007-1276 s without the three
   (2026-12-03). ``tests/test_optimization_level.py`` runs one command at the product's settings
   against the suite's. ``HBGEAR_TEST_XLA_OPTIMIZED=1`` runs the suite at the product's settings.
+- Figures drawn in the test's process (``HBGEAR_FIGURE_PROCESS=0``): the figure helper of
+  ``hbgear frc`` (:mod:`hbgear.outputs.drawing`) imports matplotlib and JAX in a process of its
+  own, ~1.5 s of a core that the suite's second worker is using; ``tests/test_drawing.py`` tests
+  the helper, and a command with it against one without.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import tempfile
 import pytest
 
 os.environ.setdefault("HBGEAR_NO_CACHE", "1")
+os.environ.setdefault("HBGEAR_FIGURE_PROCESS", "0")
 
 #: The suite's XLA code-generation flags (module docstring).
 TEST_XLA_FLAGS = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"

@@ -18,7 +18,9 @@ Load -> build -> :func:`hbgear.frequency_response` -> write, into the output dir
 - on bearings, ``frc.csv`` and ``orders.csv`` gain the bearing forces, ``bearing_forces.png``
   shows their RMS (LOA, OLOA) against speed and ``bearing_orders_<gear>_<direction>.png`` each
   force's order tracking (as ``orders.png``, in N);
-- the figures, drawn last, once the numbers are on disk (matplotlib is imported only then):
+- the figures, drawn last, once the numbers are on disk, shared between this process and a
+  helper process started with the command (:class:`hbgear.outputs.drawing.FigureDrawer`; it
+  imports matplotlib while the curve runs):
   ``frc.png`` the curve (:func:`hbgear.outputs.plots.frc_figure`); ``orders.png`` order tracking
   (order lines and the speed x order map); ``dynamic_factor.png`` ``max F_mesh / N`` with ``n_E1``
   and its ranges; ``floquet.png`` the multipliers of a few selected points on the unit circle
@@ -166,18 +168,27 @@ def _report(curve, out_dir, seconds) -> None:
 
 
 def run(config, args, out_dir) -> int:
+    from ..engine.prefetch import import_in_background
+    from ..outputs.drawing import FigureDrawer
+
+    t0 = time.perf_counter()
+    drawer = FigureDrawer(("hbgear.api",))  # a second process for the figures, importing while the curve runs
+    import_in_background("matplotlib.figure", "matplotlib.backends.backend_agg")  # the figures, drawn last
+    with drawer:
+        return _run(config, args, out_dir, drawer, t0)
+
+
+def _run(config, args, out_dir, drawer, t0) -> int:
     from dataclasses import asdict
 
     from ..api import frc_curve
     from ..engine.continuation import sweep_method
-    from ..engine.prefetch import import_in_background
     from ..errors import ConvergenceError
     from ..gear.response import FLOQUET_COLUMNS
     from ..gear.solve import rpm_to_rad_s
-    from ..outputs.io import save_figure_atomic, write_csv_atomic, write_json_atomic
+    from ..outputs.drawing import FigureJob
+    from ..outputs.io import write_csv_atomic, write_json_atomic
 
-    t0 = time.perf_counter()
-    import_in_background("matplotlib.figure", "matplotlib.backends.backend_agg")  # the figures, drawn last
     so, sw = config.solver, config.sweep
     flag, _ = _period_doubling_flag(config, args)
     curve = frc_curve(config, stability=not args.no_stability, period_doubling=flag,
@@ -199,21 +210,22 @@ def run(config, args, out_dir) -> int:
     modes = curve.natural_frequencies()
     write_json_atomic(out_dir / "modes.json", {"model": "mean mesh stiffness, no friction, undamped",
                                                "modes": modes.records(float(curve.model.teeth_pinion), (1, 2, 3))})
-    save_figure_atomic(curve.plot(), out_dir / "frc.png", dpi=120)
-    save_figure_atomic(curve.plot_orders(orders), out_dir / "orders.png", dpi=120)
-    save_figure_atomic(curve.plot_dynamic_factor(), out_dir / "dynamic_factor.png", dpi=120)
-    save_figure_atomic(curve.plot_campbell(max(int(orders.max()), 1)), out_dir / "campbell.png", dpi=120)
+    png = {"dpi": 120}
+    jobs = [FigureJob(curve.plot, (), {}, out_dir / "frc.png", png),
+            FigureJob(curve.plot_orders, (orders,), {}, out_dir / "orders.png", png),
+            FigureJob(curve.plot_dynamic_factor, (), {}, out_dir / "dynamic_factor.png", png),
+            FigureJob(curve.plot_campbell, (max(int(orders.max()), 1),), {}, out_dir / "campbell.png", png)]
     if curve.model.bearings is not None:
         from ..gear.readouts import BEARING_FORCES
         from ..outputs.plots import bearing_forces_figure
 
-        save_figure_atomic(bearing_forces_figure(curve, modes=modes), out_dir / "bearing_forces.png", dpi=120)
+        jobs.append(FigureJob(bearing_forces_figure, (curve,), {"modes": modes}, out_dir / "bearing_forces.png", png))
         amplitudes = curve.bearing_order_amplitudes_N(orders)  # once for the four figures
-        for name in BEARING_FORCES:
-            save_figure_atomic(curve.plot_bearing_orders(name, orders, amplitudes_N=amplitudes),
-                               out_dir / f"bearing_orders_{name}.png", dpi=120)
+        jobs += [FigureJob(curve.plot_bearing_orders, (name, orders), {"amplitudes_N": amplitudes},
+                           out_dir / f"bearing_orders_{name}.png", png) for name in BEARING_FORCES]
     if curve.response.stability is not None:
-        save_figure_atomic(curve.plot_floquet(), out_dir / "floquet.png", dpi=120)
+        jobs.append(FigureJob(curve.plot_floquet, (), {}, out_dir / "floquet.png", png))
+    drawer.draw(jobs)
     if not curve.success:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "

@@ -1,0 +1,277 @@
+"""Figures drawn into files by two processes: this one and a helper started with the command.
+
+matplotlib draws in Python under the interpreter lock: the five figures of ``hbgear frc``
+take ~1 s, a quarter of the LTV example's command, and a thread cannot share that work. A
+:class:`FigureDrawer` created when a command starts launches one helper, a fresh interpreter
+(``python -c``: never a fork of a process running JAX's threads, and no re-import of the
+caller's script as :mod:`multiprocessing` would do), which imports matplotlib and the modules
+the figures need while the computation runs. At :meth:`FigureDrawer.draw` the helper takes
+figures from the front of the list and this process from the back, each figure whole, until
+none is left: both cores draw.
+
+Every file is written by :func:`~hbgear.outputs.io.save_figure_atomic` in whichever process
+draws it (never half-written). A figure that fails in the helper raises here, as it would have
+in-process; a helper that died or could not start leaves its figures to this process. The
+helper lives in a session of its own (Ctrl-C is this process's to handle) and ends when its
+input closes: at :meth:`FigureDrawer.close`, or when this process ends in any way. On one usable
+CPU, or with ``HBGEAR_FIGURE_PROCESS=0``, everything is drawn here.
+
+**Public API:** :class:`FigureJob`, :class:`FigureDrawer`.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import threading
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["FigureDrawer", "FigureJob", "HelperFailed"]
+
+#: Modules the helper imports as soon as it starts (the figures' own are passed by the caller).
+BASE_MODULES = ("numpy", "matplotlib.figure", "matplotlib.backends.backend_agg", "hbgear.outputs.plots",
+                "hbgear.outputs.io")
+
+
+@dataclass(frozen=True)
+class FigureJob:
+    """One figure: ``make(*args, **kwargs)`` returns a matplotlib ``Figure``, saved to `path` with
+    the ``savefig`` keywords `savefig`. `make` and its arguments must pickle (a module-level
+    function, or a bound method of a picklable object) for the helper to draw it."""
+
+    make: Callable[..., Any]
+    args: tuple = ()
+    kwargs: dict = field(default_factory=dict)
+    path: Path = Path("figure.png")
+    savefig: dict = field(default_factory=dict)
+
+    def run(self) -> Path:
+        from .io import save_figure_atomic
+
+        return save_figure_atomic(self.make(*self.args, **self.kwargs), self.path, **self.savefig)
+
+
+class HelperFailed(RuntimeError):
+    """A figure failed in the helper with an exception that could not be sent back as itself."""
+
+
+# ----------------------------------------------------------------------------- the helper's side
+
+
+def _failure(exc: BaseException) -> bytes:
+    """`exc` pickled, or a :class:`HelperFailed` with its text where it does not pickle."""
+    try:
+        return pickle.dumps(exc)
+    except Exception:  # noqa: BLE001
+        return pickle.dumps(HelperFailed(f"{type(exc).__name__}: {exc}"))
+
+
+def _serve(modules: Sequence[str]) -> None:
+    """The helper's loop (run by ``python -c``). Messages are pickles on stdin/stdout: it says
+    ``"ready"`` once `modules` are imported; then it reads ``jobs`` (a pickled list), asks for
+    work with ``("next", result)`` and draws the index it is given, until it is given ``None``;
+    it ends at the end of its input."""
+    import importlib
+
+    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # a stray print must not corrupt the channel
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 -- the figure that needs it reports it
+            pass
+    pickle.dump("ready", stdout)
+    stdout.flush()
+    while True:
+        try:
+            jobs = pickle.load(stdin)
+        except EOFError:
+            return
+        result = None
+        while True:
+            pickle.dump(("next", result), stdout)
+            stdout.flush()
+            index = pickle.load(stdin)
+            if index is None:
+                break
+            try:
+                result = (index, str(jobs[index].run()), None)
+            except Exception as exc:  # noqa: BLE001 -- sent back, raised by the caller
+                result = (index, None, _failure(exc))
+
+
+# ----------------------------------------------------------------------------- the drawer
+
+
+_ENDING: list = []
+
+
+def _usable_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+class FigureDrawer:
+    """Draws :class:`FigureJob` lists with a helper process (module docstring).
+
+    **Arguments:** `modules`: imported by the helper when it starts (those the figures' objects
+    need to unpickle, e.g. ``"hbgear.api"``); `helper`: ``None`` (default) uses one when two
+    CPUs are usable and ``HBGEAR_FIGURE_PROCESS`` is not ``0``; ``False`` never; ``True``
+    always. A context manager; or call :meth:`close`.
+
+    **Attributes:** `drawn_by_helper`: figures of the last :meth:`draw` the helper drew.
+    """
+
+    def __init__(self, modules: Sequence[str] = (), *, helper: bool | None = None):
+        if helper is None:
+            helper = os.environ.get("HBGEAR_FIGURE_PROCESS", "1").strip() != "0" and _usable_cpus() >= 2
+        self._process = None
+        self._ready = False
+        self.drawn_by_helper = 0
+        if helper:
+            self._process = self._start(tuple(BASE_MODULES) + tuple(modules))
+
+    @staticmethod
+    def _start(modules):
+        import subprocess
+
+        package_root = str(Path(__file__).resolve().parents[2])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
+        env["MPLBACKEND"] = "Agg"
+        code = f"from hbgear.outputs.drawing import _serve; _serve({list(modules)!r})"
+        try:
+            return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    env=env, start_new_session=True)
+        except OSError:
+            return None
+
+    @property
+    def has_helper(self) -> bool:
+        return self._process is not None
+
+    def wait_ready(self, timeout_s: float) -> bool:
+        """Wait at most `timeout_s` for the helper to finish its imports. **Returns:** whether it
+        has (``False`` without a helper)."""
+        import select
+
+        process = self._process
+        if process is None or self._ready:
+            return self._ready and process is not None
+        if not select.select([process.stdout], [], [], timeout_s)[0]:
+            return False
+        self._read_ready(process)
+        return self._process is not None
+
+    def _read_ready(self, process) -> None:
+        try:
+            if pickle.load(process.stdout) != "ready":
+                raise EOFError
+            self._ready = True
+        except Exception:  # noqa: BLE001 -- a helper that cannot talk is no helper
+            self._stop()
+
+    def draw(self, jobs: Sequence[FigureJob]) -> list[Path]:
+        """Draw every job (the helper from the front, this process from the back).
+
+        **Returns:** the paths written, in the order of `jobs`. **Raises:** the exception of the
+        first failing job (in the order of `jobs`), after every other job has finished."""
+        jobs = list(jobs)
+        self.drawn_by_helper = 0
+        if self._process is None or len(jobs) < 2:
+            return [job.run() for job in jobs]
+        try:
+            blob = pickle.dumps(jobs, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # noqa: BLE001 -- something does not pickle: draw here
+            return [job.run() for job in jobs]
+        pending = deque(range(len(jobs)))
+        taken: set = set()  # indices the helper is drawing
+        lost: list = []  # indices the helper took but did not finish (it died)
+        paths: list = [None] * len(jobs)
+        errors: dict = {}
+        turn = threading.Condition()
+
+        def feed():  # this thread talks to the helper; it is never waited for beyond the figures it took
+            process = self._process
+            try:
+                if not self._ready:
+                    if pickle.load(process.stdout) != "ready":
+                        raise EOFError
+                    self._ready = True
+                process.stdin.write(blob)
+                process.stdin.flush()
+                while True:
+                    _, result = pickle.load(process.stdout)
+                    with turn:
+                        if result is not None:
+                            index, path, error = result
+                            if error is None:
+                                paths[index] = Path(path)
+                                self.drawn_by_helper += 1
+                            else:
+                                errors[index] = pickle.loads(error)
+                            taken.discard(index)
+                        index = pending.popleft() if pending else None
+                        if index is not None:
+                            taken.add(index)
+                        turn.notify_all()
+                    pickle.dump(index, process.stdin)
+                    process.stdin.flush()
+                    if index is None:
+                        return
+            except Exception:  # noqa: BLE001 -- the helper is gone: what it took is drawn here
+                with turn:
+                    lost.extend(taken)
+                    taken.clear()
+                    turn.notify_all()
+                self._stop()
+
+        threading.Thread(target=feed, name="hbgear-figures", daemon=True).start()
+        while True:
+            with turn:
+                if not pending:
+                    break
+                index = pending.pop()
+            self._run_here(jobs, index, paths, errors)
+        with turn:
+            turn.wait_for(lambda: not taken)
+        for index in lost:
+            self._run_here(jobs, index, paths, errors)
+        if errors:
+            raise errors[min(errors)]
+        return paths
+
+    @staticmethod
+    def _run_here(jobs, index, paths, errors) -> None:
+        try:
+            paths[index] = jobs[index].run()
+        except Exception as exc:  # noqa: BLE001 -- raised by draw after the others finish
+            errors[index] = exc
+
+    def _stop(self) -> None:
+        process, self._process = self._process, None
+        if process is not None:
+            for stream in (process.stdin, process.stdout):
+                try:
+                    stream.close()
+                except OSError:
+                    pass
+            _ENDING.append(process)  # exits at the end of its input; reaped later, never waited for
+            _ENDING[:] = [p for p in _ENDING if p.poll() is None]
+
+    def close(self) -> None:
+        """End the helper (it exits when its input closes; nothing waits for it)."""
+        self._stop()
+
+    def __enter__(self) -> FigureDrawer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
