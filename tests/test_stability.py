@@ -226,6 +226,35 @@ def test_variational_monodromy_batch_equals_the_members_alone():
         monodromy_variational(TwoGeometries(m), omegas[:2], lambda tau: (np.zeros((2, 2)), np.zeros((2, 2))))
 
 
+def test_compiled_variational_monodromy_equals_scipys_dop853():
+    """The variational equations integrated inside one compiled program (Dormand-Prince 5(4),
+    hbgear.engine.dopri) against SciPy's DOP853 driven from Python, an integrator of another
+    order and code: the same monodromy matrices (NLTV arctan, soft spring, H = 16, three speeds
+    about the 5270 rpm crossing and one at 12000 rpm, batched; one alone); a state that is not a
+    synthesis cannot take the compiled way; an unknown integrator is refused."""
+    from hbgear.engine.monodromy import monodromy_variational, state_synthesis
+    from hbgear.gear.solve import solve_periodic
+
+    m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
+    omegas = np.array([5250.0, 5270.0, 5290.0, 12000.0]) / RPM
+    sols = [solve_periodic(m, w, harmonics=16, samples=128) for w in omegas]
+    system = GearSystem(m)
+    state = state_synthesis(np.stack([s.coefficients for s in sols]), 16, np.array([s.base_frequency for s in sols]))
+    compiled = monodromy_variational(system, omegas, state, integrator="compiled")
+    scipy_dop853 = monodromy_variational(system, omegas, state, integrator="DOP853")
+    assert compiled.shape == (4, 4, 4)
+    for a, b in zip(compiled, scipy_dop853):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 * np.abs(b).max())
+        np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(a)), np.sort_complex(np.linalg.eigvals(b)),
+                                   rtol=0, atol=1e-8)
+    alone = monodromy_variational(system, omegas[1], state_synthesis(sols[1].coefficients, 16, sols[1].base_frequency))
+    np.testing.assert_allclose(alone, scipy_dop853[1], rtol=0, atol=1e-8 * np.abs(alone).max())
+    with pytest.raises(ValueError, match="state_synthesis"):
+        monodromy_variational(system, omegas[0], sols[0].state_at, integrator="compiled")
+    with pytest.raises(ValueError, match="allowed"):
+        monodromy_variational(system, omegas[0], state, integrator="RK4")
+
+
 def test_branch_stability_beyond_hills_size_takes_the_variational_equations(monkeypatch):
     """Hill's matrices larger than ``HILL_MAX_SIZE`` square: the branch's multipliers come from
     the variational equations (the NLTV pair at 200 rpm, H = 512: Hill took 84 s a point there
