@@ -171,8 +171,9 @@ def _frc(out: Path, cache: Path | None) -> dict:
 
 
 def test_a_warm_frc_run_loads_its_programs_and_writes_the_same_files(tmp_path):
-    """The corrector and Hill's pencils of an NLTV curve: exported by the first run, loaded by
-    the second (nothing traced); both write the files of a run that keeps nothing."""
+    """The corrector and the variational equations' integration (the stability of every point) of
+    an NLTV curve: exported by the first run, loaded by the second (nothing traced); both write
+    the files of a run that keeps nothing."""
     cache = tmp_path / "cache"
     first = _frc(tmp_path / "first", cache)["programs"]
     second = _frc(tmp_path / "second", cache)["programs"]
@@ -181,7 +182,7 @@ def test_a_warm_frc_run_loads_its_programs_and_writes_the_same_files(tmp_path):
     assert second["exported"] == 0 and second["loaded"] == first["exported"], second
     assert plain["directory"] is None and plain["exported"] == plain["loaded"] == 0
     names = {p.name.split("-")[0] for p in (cache / "hbgear-programs").rglob("*.bin")}
-    assert {"advance", "hill"} <= names, names
+    assert {"advance", "variational"} <= names, names
     for name in ("frc.csv", "floquet.csv", "orders.csv"):
         text = (tmp_path / "plain" / name).read_bytes()
         assert (tmp_path / "first" / name).read_bytes() == text

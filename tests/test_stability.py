@@ -255,14 +255,15 @@ def test_compiled_variational_monodromy_equals_scipys_dop853():
         monodromy_variational(system, omegas[0], state, integrator="RK4")
 
 
-def test_branch_stability_beyond_hills_size_takes_the_variational_equations(monkeypatch):
-    """Hill's matrices larger than ``HILL_MAX_SIZE`` square: the branch's multipliers come from
-    the variational equations (the NLTV pair at 200 rpm, H = 512: Hill took 84 s a point there
-    and returned a spurious third multiplier). Checked on an NLTV arctan branch at H = 32, N = 1024
-    (Hill's size 130) with the limit lowered below it: the same multipliers as Hill's to within
-    1e-4 (3.6e-5 measured; 3.6e-3 at N = 256, where Hill's matrices alias the friction's sign
-    change; the two routes share no code but the harmonic-balance solutions), the same verdicts,
-    the method named; with the limit as shipped, Hill is used."""
+def test_branch_stability_takes_the_variational_equations_and_hill_on_request(monkeypatch):
+    """A branch's multipliers come from the variational equations (compiled), or from Hill's
+    method with ``method="hill"`` while its matrices are at most ``HILL_MAX_SIZE`` square (the
+    NLTV pair at 200 rpm, H = 512: Hill took 84 s a point there and returned a spurious third
+    multiplier). NLTV arctan, H = 32, N = 1024 (Hill's size 130): the two routes' multipliers
+    within 1e-4 (3.6e-5 measured; 3.6e-3 at N = 256, where Hill's matrices alias the friction's
+    sign change; they share no code but the harmonic-balance solutions), the same verdicts, each
+    method named; with the limit lowered below 130, Hill's request gets the variational equations,
+    with the reason."""
     from hbgear.engine import stability
     from hbgear.gear.solve import solve_periodic
 
@@ -271,19 +272,42 @@ def test_branch_stability_beyond_hills_size_takes_the_variational_equations(monk
     hb = HarmonicBalance(m.ndof, 32, 1, 1024)
     omegas = np.array([5200.0, 5300.0, 5400.0, 8700.0]) / RPM  # in and out of two period-doubling zones
     zs = np.stack([solve_periodic(m, w, harmonics=32, samples=1024).z for w in omegas])
-    hill = stability.branch_stability(hb, system, omegas, zs, progress=False)
+    default = stability.branch_stability(hb, system, omegas, zs, progress=False)
+    assert default.method.startswith("the variational equations") and default.warning is None
+    hill = stability.branch_stability(hb, system, omegas, zs, method="hill", progress=False)
     assert stability.uses_hill(hb) and hill.method.startswith("Hill's method")
     monkeypatch.setattr(stability, "HILL_MAX_SIZE", hb.size - 1)
     assert not stability.uses_hill(hb)
-    exact = stability.branch_stability(hb, system, omegas, zs, progress=False)
-    assert exact.method.startswith("the variational equations") and "130 > 129" in exact.method
-    assert exact.warning is None
-    for a, b in zip(hill.multipliers, exact.multipliers):
+    beyond = stability.branch_stability(hb, system, omegas, zs, method="hill", progress=False)
+    assert beyond.method.startswith("the variational equations") and "130 > 129" in beyond.method
+    for a, b, c in zip(hill.multipliers, default.multipliers, beyond.multipliers):
         assert max_pair_distance(a, b) < 1e-4, (a, b)
-    np.testing.assert_array_equal(hill.stable, exact.stable)
-    assert list(exact.stable) == [1.0, 0.0, 1.0, 0.0]
+        assert max_pair_distance(b, c) < 1e-12, (b, c)
+    np.testing.assert_array_equal(hill.stable, default.stable)
+    assert list(default.stable) == [1.0, 0.0, 1.0, 0.0]
+    with pytest.raises(ValueError, match="allowed"):
+        stability.branch_stability(hb, system, omegas, zs, method="dense")
 
 
+def test_points_near_a_fold_take_hill_so_the_verdict_changes_at_the_fold():
+    """Within ``FOLD_WINDOW`` points of a fold index the multipliers are Hill's (the harmonic-
+    balance Jacobian's), elsewhere the variational equations'; the method text says both."""
+    from hbgear.engine import stability
+    from hbgear.engine.floquet import hill_multipliers
+    from hbgear.gear.solve import solve_periodic
+
+    m = build_model(config("friction.model='NLTV'", "friction.law='arctan'"))
+    system = GearSystem(m)
+    hb = HarmonicBalance(m.ndof, 16, 1, 256)
+    omegas = np.linspace(6000.0, 6400.0, 12) / RPM
+    zs = np.stack([solve_periodic(m, w, harmonics=16, samples=256).z for w in omegas])
+    mixed = stability.branch_stability(hb, system, omegas, zs, folds=[0], progress=False)
+    assert "the variational equations" in mixed.method and "Hill's method (hbgear.engine.floquet" in mixed.method
+    window = stability.FOLD_WINDOW
+    for i, (w, z) in enumerate(zip(omegas, zs)):
+        alone = hill_multipliers(hb, z, float(w), system)
+        distance = max_pair_distance(mixed.multipliers[i], alone)
+        assert (distance < 1e-10) == (i <= window), (i, distance)
 # ----------------------------------------------------------------------------- tongues
 
 

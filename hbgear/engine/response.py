@@ -420,7 +420,8 @@ def frequency_response(system, parameter: tuple[float, float], *, harmonics: int
     branch = _follow(system, hb, p0, p1, z0, tolerance=tolerance, max_points=max_points,
                      max_iterations=max_iterations, step=step, progress=progress, start=start)
     t1 = clock()
-    stab = branch_stability(hb, system, branch.p, branch.z, progress=progress) if stability and len(branch) else None
+    stab = (branch_stability(hb, system, branch.p, branch.z, folds=branch.folds, progress=progress)
+            if stability and len(branch) else None)
     t2 = clock()
     found_zones = unstable_zones(system, branch.p) if zones and stability and system.is_linear and len(branch) > 1 else []
     t3 = clock()

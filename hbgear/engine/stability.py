@@ -6,14 +6,24 @@ At each point the multipliers come from the cheapest exact route that applies:
   points) where the system's :meth:`~hbgear.engine.system.PeriodicSystem.linearization` holds
   along the solution (a linear system everywhere; e.g. the gear pair with backlash where the
   teeth keep contact);
-- **Hill's method** elsewhere, along each run of neighbouring points with every point seeded
-  from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`), while its matrices
-  are at most :data:`HILL_MAX_SIZE` square;
-- **the variational equations** (:func:`hbgear.engine.monodromy.monodromy_variational`, batches
-  of :data:`VARIATIONAL_POINTS` points integrated together) for larger ones: Hill's eigenproblems
-  grow as ``(n (2H+1))^3`` and its selection of the central exponents among ``2H+1`` copies
-  gets less reliable, while the integration of the ``2n x 2n`` monodromy costs about the same
-  at any ``H``.
+- **the variational equations** elsewhere (:func:`hbgear.engine.monodromy.monodromy_variational`
+  along the harmonic-balance orbits, :data:`VARIATIONAL_POINTS` neighbouring points integrated
+  together in one compiled program): the multipliers of the model's equations linearised about
+  each orbit, to the integrator's tolerance (:data:`VARIATIONAL_RTOL`). On the NLTV gear pair
+  (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.60-0.64 s for the curve, within
+  6.9e-10 of a run at rtol 1e-12, where Hill's method took 2.0-2.1 s and was 7.8e-4 off (its
+  truncation and the sampling of the friction's steep Jacobian); the same stability verdicts.
+- **Hill's method** within :data:`FOLD_WINDOW` points of the branch's folds (`folds`), and
+  everywhere on request (``method="hill"``), along each run of neighbouring points with every
+  point seeded from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`), while its
+  matrices are at most :data:`HILL_MAX_SIZE` square (beyond, the variational equations: Hill's
+  eigenproblems grow as ``(n (2H+1))^3`` and its selection of the central exponents among
+  ``2H+1`` copies gets less reliable). At a fold of the computed curve a multiplier is +1
+  because the harmonic-balance Jacobian is singular there, and Hill's exponents are those of
+  that Jacobian's Hill matrix: the stability changes exactly at the fold. The variational
+  equations along the truncated orbits put that crossing off the fold by the truncation error:
+  on the relieved ISO pair at H = 12, N = 256 (partial contact loss), up to five points on the
+  stable side of a fold came out unstable.
 
 Multipliers are over the base period of the discretisation (``nu`` excitation periods). A batch
 that fails is redone point by point, so one bad point costs only itself (``None``).
@@ -28,7 +38,7 @@ import numpy as np
 
 from .floquet import hill_exponents_along, hill_follower, hill_multipliers, stable_verdicts
 
-__all__ = ["BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
+__all__ = ["BRANCH_METHODS", "BranchStability", "branch_stability", "unstable_zones", "leaves_through", "HILL_BATCH",
            "HILL_MAX_SIZE", "VARIATIONAL_POINTS", "ZONE_SCAN_SUBDIVISIONS", "uses_hill"]
 
 #: Points per call of :func:`~hbgear.engine.floquet.hill_exponents_along` (the progress bar
@@ -42,7 +52,19 @@ HILL_BATCH = 128
 #: of the variational equations took 5.9 s. Every bundled example is below it (130-390).
 HILL_MAX_SIZE = 512
 
-#: Points per batched integration of the variational equations (:data:`HILL_MAX_SIZE`).
+#: Points on either side of a fold that take Hill's method (module docstring).
+FOLD_WINDOW = 8
+
+#: Relative and absolute tolerances of the branch's variational equations (per member of a batch):
+#: the NLTV curve above's multipliers within 6.9e-10 of a run at rtol 1e-12, in 0.60-0.64 s
+#: (0.89-0.96 s at 1e-10, 6.4e-11).
+VARIATIONAL_RTOL, VARIATIONAL_ATOL = 1e-9, 1e-11
+
+#: Points per batched integration of the variational equations. The batch shares its steps
+#: (each member's spikes of the friction's Jacobian sit at its own instants), so larger batches
+#: take more steps but cost less per point up to ~64: the NLTV curve above in 0.92-1.13 s with
+#: batches of 16, 0.89-0.96 s with 64 (rtol 1e-10); one member alone per integration (vmapped, its
+#: own steps) took 2.8-4.4 s.
 VARIATIONAL_POINTS = 64
 
 #: Sub-intervals per branch step of the exact scan for unstable zones (:func:`unstable_zones`).
@@ -120,13 +142,14 @@ def _variational_in_batches(hb, system, ps, zs, indices, out, progress, label) -
     """Multipliers over the base period from the variational equations along the solutions at the
     points `indices`, :data:`VARIATIONAL_POINTS` of them per integration, into ``out[i]``; a
     failing batch is redone point by point. **Returns:** the failure messages."""
-    from .monodromy import monodromy_variational, state_synthesis
+    from .monodromy import drop_trivial, monodromy_variational, state_synthesis
 
     def multipliers(rows):
         coefficients = np.stack([hb.decode(system, zs[i])[0] for i in rows])
         base = np.array([float(hb.base_frequency(system, ps[i])) for i in rows])
-        phi = monodromy_variational(system, ps[rows], state_synthesis(coefficients, hb.harmonics, base), hb.nu)
-        return np.linalg.eigvals(phi)
+        phi = monodromy_variational(system, ps[rows], state_synthesis(coefficients, hb.harmonics, base), hb.nu,
+                                    rtol=VARIATIONAL_RTOL, atol=VARIATIONAL_ATOL)
+        return drop_trivial(np.linalg.eigvals(phi), system)  # as Hill's and the exact route's
 
     failures = []
     bar = _progress(len(indices), label, progress)
@@ -169,42 +192,60 @@ def _exact_in_batches(linear, ps, indices, out, nu) -> None:
             out[k] = m
 
 
-def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multipliers") -> BranchStability:
+#: The ways :func:`branch_stability` takes where no exact route applies.
+BRANCH_METHODS = ("variational", "hill")
+
+
+def branch_stability(hb, system, ps, zs, *, method: str = "variational", folds=(), progress=None,
+                     label="Floquet multipliers") -> BranchStability:
     """Floquet multipliers over the base period at every point ``(ps[i], zs[i])`` of a branch of
-    `system` discretised by `hb` (module docstring: exact monodromy where it applies, else Hill).
+    `system` discretised by `hb` (module docstring: exact monodromy where it applies, else the
+    variational equations, Hill's method within :data:`FOLD_WINDOW` points of the indices
+    `folds`, or everywhere with ``method="hill"``).
 
     **Returns:** a :class:`BranchStability`; stability by :func:`~hbgear.engine.floquet.stable_verdict`
     (the system's known neutral modes left out).
     """
+    if method not in BRANCH_METHODS:
+        raise ValueError(f"branch_stability: method = {method!r}; allowed: {', '.join(map(repr, BRANCH_METHODS))}")
     ps, zs = np.asarray(ps, dtype=float), np.asarray(zs, dtype=float)
     n = len(ps)
     out: list = [None] * n
     linear = system.linearization()
     exact = [i for i in range(n) if linear is not None and (linear is system or system.in_linear_regime(hb, zs[i], ps[i]))]
     taken = set(exact)
-    hill = [i for i in range(n) if i not in taken]
+    rest = [i for i in range(n) if i not in taken]
     fallback = None
     if exact:
         try:
             _exact_in_batches(linear, ps, exact, out, hb.nu)
-        except Exception as exc:  # noqa: BLE001 -- Hill instead
-            fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); Hill's method used"
-            hill, exact = sorted(hill + exact), []
-    if uses_hill(hb):
-        failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label)
-        hill_text = "Hill's method (hbgear.engine.floquet.hill_exponents_along)"
+        except Exception as exc:  # noqa: BLE001 -- the general route instead
+            fallback = f"exact monodromy failed ({type(exc).__name__}: {exc}); the general route used"
+            rest, exact = sorted(rest + exact), []
+    hill_text = "Hill's method (hbgear.engine.floquet.hill_exponents_along)"
+    variational_text = "the variational equations (hbgear.engine.monodromy.monodromy_variational)"
+    if not uses_hill(hb):
+        hill, rest = [], rest
+        if method == "hill":
+            variational_text = variational_text[:-1] + f"; Hill's matrices would be {hb.size} > {HILL_MAX_SIZE} square)"
+    elif method == "hill":
+        hill, rest = rest, []
     else:
-        failures = _variational_in_batches(hb, system, ps, zs, hill, out, progress, label)
-        hill_text = (f"the variational equations (hbgear.engine.monodromy.monodromy_variational; Hill's matrices "
-                     f"would be {hb.size} > {HILL_MAX_SIZE} square)")
+        near = {i for f in folds for i in range(int(f) - FOLD_WINDOW, int(f) + FOLD_WINDOW + 1)}
+        hill, rest = [i for i in rest if i in near], [i for i in rest if i not in near]
+    failures = _hill_in_batches(hb, system, ps, zs, hill, out, progress, label) if hill else []
+    failures += _variational_in_batches(hb, system, ps, zs, rest, out, progress, label) if rest else []
+    parts = [text for text, ok in ((variational_text, rest), (hill_text + (" near the folds" if rest else ""), hill)) if ok]
+    rest_text = " and ".join(parts)
+    rest = rest + hill
     exact_text = "exact monodromy (hbgear.engine.monodromy.multipliers_linear)"
-    if not hill:
-        method = exact_text
+    if not rest:
+        method_text = exact_text
     elif not exact:
-        method = hill_text
+        method_text = rest_text
     else:
-        method = (f"{exact_text} at the {len(exact)} points in the linear regime (e.g. the teeth keep contact), "
-                  f"{hill_text} at the {len(hill)} others")
+        method_text = (f"{exact_text} at the {len(exact)} points in the linear regime (e.g. the teeth keep contact), "
+                  f"{rest_text} at the {len(rest)} others")
     warning = fallback
     if failures:
         warning = ((fallback + "; ") if fallback else "") + (
@@ -214,7 +255,7 @@ def branch_stability(hb, system, ps, zs, *, progress=None, label="Floquet multip
     for size in {m.size for m in out if m is not None}:  # one vectorised verdict per multiplier count
         rows = [i for i, m in enumerate(out) if m is not None and m.size == size]
         stable[rows] = stable_verdicts(system, ps[rows], np.stack([out[i] for i in rows]), hb.nu)
-    return BranchStability(out, max_abs, stable, method, warning)
+    return BranchStability(out, max_abs, stable, method_text, warning)
 
 
 def leaves_through(multiplier) -> str:
