@@ -289,6 +289,28 @@ def test_branch_stability_takes_the_variational_equations_and_hill_on_request(mo
         stability.branch_stability(hb, system, omegas, zs, method="dense")
 
 
+def test_a_force_that_jumps_with_the_state_takes_hill():
+    """Backlash with friction declares the flank contacts as event functions (its friction load
+    jumps where a flank opens): the branch's multipliers are Hill's, the reason named."""
+    from hbgear.engine import stability
+    from hbgear.engine.events import declared
+    from hbgear.engine.floquet import hill_multipliers
+    from hbgear.gear.solve import solve_periodic
+
+    m = build_model(load_config(EXAMPLE.parent / "backlash.toml", ["friction.law='arctan'", "friction.mu0=0.05"]))
+    system = GearSystem(m)
+    assert declared(system, 13000.0 / RPM)
+    hb = HarmonicBalance(m.ndof, 8, 1, 128)
+    omegas = np.array([13000.0, 13100.0]) / RPM  # the flanks separate: out of the linear regime
+    zs = [solve_periodic(m, omegas[0], harmonics=8, samples=128).z]
+    zs.append(solve_periodic(m, omegas[1], harmonics=8, samples=128, z0=zs[0]).z)
+    assert not any(system.in_linear_regime(hb, z, w) for z, w in zip(zs, omegas))
+    result = stability.branch_stability(hb, system, omegas, np.stack(zs), progress=False)
+    assert result.method.startswith("Hill's method") and "saltation" in result.method, result.method
+    for w, z, mult in zip(omegas, zs, result.multipliers):
+        assert max_pair_distance(mult, hill_multipliers(hb, z, float(w), system)) < 1e-10
+
+
 def test_points_near_a_fold_take_hill_so_the_verdict_changes_at_the_fold():
     """Within ``FOLD_WINDOW`` points of a fold index the multipliers are Hill's (the harmonic-
     balance Jacobian's), elsewhere the variational equations'; the method text says both."""

@@ -13,8 +13,9 @@ At each point the multipliers come from the cheapest exact route that applies:
   (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.60-0.64 s for the curve, within
   6.9e-10 of a run at rtol 1e-12, where Hill's method took 2.0-2.1 s and was 7.8e-4 off (its
   truncation and the sampling of the friction's steep Jacobian); the same stability verdicts.
-- **Hill's method** within :data:`FOLD_WINDOW` points of the branch's folds (`folds`), and
-  everywhere on request (``method="hill"``), along each run of neighbouring points with every
+- **Hill's method** within :data:`FOLD_WINDOW` points of the branch's folds (`folds`), for
+  systems whose force jumps at instants the state decides (declared event functions,
+  :mod:`hbgear.engine.events`), and everywhere on request (``method="hill"``), along each run of neighbouring points with every
   point seeded from the one before (:func:`hbgear.engine.floquet.hill_exponents_along`), while its
   matrices are at most :data:`HILL_MAX_SIZE` square (beyond, the variational equations: Hill's
   eigenproblems grow as ``(n (2H+1))^3`` and its selection of the central exponents among
@@ -23,7 +24,13 @@ At each point the multipliers come from the cheapest exact route that applies:
   that Jacobian's Hill matrix: the stability changes exactly at the fold. The variational
   equations along the truncated orbits put that crossing off the fold by the truncation error:
   on the relieved ISO pair at H = 12, N = 256 (partial contact loss), up to five points on the
-  stable side of a fold came out unstable.
+  stable side of a fold came out unstable. Where the force jumps at a state-dependent instant
+  (formulation A's friction load of a pair that loses contact), the harmonic-balance residual
+  integrates the jump where it moves (its Jacobian holds the instant's sensitivity, a saltation
+  in effect) and the variational equations would not: on ``examples/iso_tip_relief.toml`` at
+  9400.94 rpm (an unstable branch between folds) the largest multiplier converges to 1.28890
+  by Hill's method (H = 24, 48, 96: 1.288932, 1.288896, 1.288896) and to 1.51490 by the
+  variational equations along the same orbits.
 
 Multipliers are over the base period of the discretisation (``nu`` excitation periods). A batch
 that fails is redone point by point, so one bad point costs only itself (``None``).
@@ -132,6 +139,14 @@ def _hill_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[
     return failures
 
 
+def _jumps_with_the_state(system, p) -> bool:
+    """Whether `system` declares event functions (:mod:`hbgear.engine.events`: its force jumps
+    where the state says, e.g. a friction load that exists while two flanks touch)."""
+    from .events import declared
+
+    return bool(declared(system, float(p)))
+
+
 def uses_hill(hb) -> bool:
     """Whether a branch discretised by `hb` takes Hill's method where no exact route applies
     (its matrices at most :data:`HILL_MAX_SIZE` square), else the variational equations."""
@@ -228,8 +243,11 @@ def branch_stability(hb, system, ps, zs, *, method: str = "variational", folds=(
         hill, rest = [], rest
         if method == "hill":
             variational_text = variational_text[:-1] + f"; Hill's matrices would be {hb.size} > {HILL_MAX_SIZE} square)"
-    elif method == "hill":
+    elif method == "hill" or (rest and _jumps_with_the_state(system, ps[rest[0]])):
         hill, rest = rest, []
+        if method != "hill":
+            hill_text = hill_text[:-1] + ("; the force jumps at instants the state decides, which the variational "
+                                          "equations would need saltation matrices for)")
     else:
         near = {i for f in folds for i in range(int(f) - FOLD_WINDOW, int(f) + FOLD_WINDOW + 1)}
         hill, rest = [i for i in rest if i in near], [i for i in rest if i not in near]
