@@ -111,18 +111,23 @@ def _segments(system, p) -> np.ndarray:
 
 def _linear_coefficients(system, p, s: np.ndarray):
     """``K(s)``, ``C(s)`` of ``M q'' = F(s) - K q - C q'`` (a linear system), shapes ``(len(s), n, n)``,
-    from differences of the force at zero and at unit states (it is affine)."""
+    from differences of the force at zero and at unit states (it is affine): one evaluation of the
+    force at the ``2n + 1`` states side by side (the gear pair's static wind-up and the model's
+    other per-call work once instead of ``2n + 1`` times)."""
     n = system.ndof
-    zeros = np.zeros((n,) + s.shape)
-    f0 = np.asarray(system.force(s, zeros, zeros, p, "linear", 0.0, np), dtype=float)
-    stiff = np.empty((s.size, n, n))
-    damp = np.empty((s.size, n, n))
+    s = np.asarray(s, dtype=float).ravel()
+    m = s.size
+    q = np.zeros((n, 2 * n + 1, m))
+    qd = np.zeros((n, 2 * n + 1, m))
     for j in range(n):
-        unit = zeros.copy()
-        unit[j] = 1.0
-        stiff[:, :, j] = (f0 - np.asarray(system.force(s, unit, zeros, p, "linear", 0.0, np), dtype=float)).T
-        damp[:, :, j] = (f0 - np.asarray(system.force(s, zeros, unit, p, "linear", 0.0, np), dtype=float)).T
-    return stiff, damp
+        q[j, 1 + j] = 1.0
+        qd[j, 1 + n + j] = 1.0
+    f = np.asarray(system.force(np.tile(s, 2 * n + 1), q.reshape(n, -1), qd.reshape(n, -1), p, "linear", 0.0, np),
+                   dtype=float).reshape(n, 2 * n + 1, m)
+    differences = f[:, :1] - f[:, 1:]  # (n, 2n, m): column j of K, then of C
+    stiff = np.transpose(differences[:, :n], (2, 0, 1))
+    damp = np.transpose(differences[:, n:], (2, 0, 1))
+    return np.ascontiguousarray(stiff), np.ascontiguousarray(damp)
 
 
 def _state_matrices(system, p, s: np.ndarray, w_ref: float) -> np.ndarray:
