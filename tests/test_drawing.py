@@ -117,3 +117,13 @@ def test_hbgear_frc_writes_the_same_files_with_the_helper_as_without(tmp_path, m
     for name in names:
         if name != "frc.json":  # its timings differ
             assert (outs["0"] / name).read_bytes() == (outs["1"] / name).read_bytes(), name
+
+
+def test_a_helper_left_unused_ends_quietly(capfd):
+    """A command that fails before its figures closes the helper while it may still be importing:
+    the helper ends at the end of its input without a word on the (shared) stderr."""
+    drawer = FigureDrawer(helper=True)
+    process = drawer._process
+    drawer.close()
+    assert process.wait(120) == 0
+    assert capfd.readouterr().err == ""

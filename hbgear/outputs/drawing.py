@@ -85,13 +85,17 @@ def _serve(modules: Sequence[str]) -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 -- the figure that needs it reports it
             pass
+    try:
+        _loop(stdin, stdout)
+    except (EOFError, OSError):  # the command ended (or closed the pipes) first: nothing to say
+        pass
+
+
+def _loop(stdin, stdout) -> None:
     pickle.dump("ready", stdout)
     stdout.flush()
     while True:
-        try:
-            jobs = pickle.load(stdin)
-        except EOFError:
-            return
+        jobs = pickle.load(stdin)  # EOFError at the end of the input
         result = None
         while True:
             pickle.dump(("next", result), stdout)
