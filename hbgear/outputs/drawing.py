@@ -13,7 +13,7 @@ Every file is written by :func:`~hbgear.outputs.io.save_figure_atomic` in whiche
 draws it (never half-written). A figure that fails in the helper raises here, as it would have
 in-process; a helper that died or could not start leaves its figures to this process. The
 helper lives in a session of its own (Ctrl-C is this process's to handle) and ends when its
-input closes: at :meth:`FigureDrawer.close`, or when this process ends in any way. On one usable
+input closes: at :meth:`FigureDrawer.close` (which reaps it), or when this process ends in any way. On one usable
 CPU, or with ``HBGEAR_FIGURE_PROCESS=0``, everything is drawn here.
 
 **Public API:** :class:`FigureJob`, :class:`FigureDrawer`.
@@ -112,7 +112,9 @@ def _loop(stdin, stdout) -> None:
 # ----------------------------------------------------------------------------- the drawer
 
 
-_ENDING: list = []
+#: Seconds :meth:`FigureDrawer.close` waits for the helper to end before killing it (a helper
+#: closed before it has finished importing: a command that failed early).
+HELPER_EXIT_S = 5.0
 
 
 def _usable_cpus() -> int:
@@ -267,11 +269,15 @@ class FigureDrawer:
                     stream.close()
                 except OSError:
                     pass
-            _ENDING.append(process)  # exits at the end of its input; reaped later, never waited for
-            _ENDING[:] = [p for p in _ENDING if p.poll() is None]
+            try:  # it exits at the end of its input (at once unless it is still importing)
+                process.wait(timeout=HELPER_EXIT_S)
+            except Exception:  # noqa: BLE001 -- still importing, or stuck: it has nothing to finish
+                process.kill()
+                process.wait()
 
     def close(self) -> None:
-        """End the helper (it exits when its input closes; nothing waits for it)."""
+        """End the helper: its input closes and it exits (killed if it has not after
+        :data:`HELPER_EXIT_S`)."""
         self._stop()
 
     def __enter__(self) -> FigureDrawer:
