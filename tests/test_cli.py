@@ -206,6 +206,22 @@ def test_python_dash_m_entry_point(tmp_path):
     assert result.returncode == 2
 
 
+def test_console_script_flushes_what_was_printed_and_keeps_the_status():
+    """console_main ends the process with os._exit: buffered output (a pipe) must still arrive whole."""
+    code = ("import sys, hbgear.cli as cli\n"
+            "def fake():\n"
+            "    print('x' * 200000, end='')\n"
+            "    print('END', file=sys.stderr, end='')\n"
+            "    sys.stdout.write('END')\n"
+            "    return 5\n"
+            "cli.main = fake\n"
+            "cli.console_main()\n"
+            "print('not reached')\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 5
+    assert result.stdout == "x" * 200000 + "END" and result.stderr == "END"
+
+
 # ----------------------------------------------------------------------------- hbgear validate as a gate
 
 

@@ -75,7 +75,7 @@ def _serve(modules: Sequence[str]) -> None:
     """The helper's loop (run by ``python -c``). Messages are pickles on stdin/stdout: it says
     ``"ready"`` once `modules` are imported; then it reads ``jobs`` (a pickled list), asks for
     work with ``("next", result)`` and draws the index it is given, until it is given ``None``;
-    it ends at the end of its input."""
+    it ends at the end of its input, at once (``os._exit``: nothing is left to tear down)."""
     import importlib
 
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
@@ -89,6 +89,10 @@ def _serve(modules: Sequence[str]) -> None:
         _loop(stdin, stdout)
     except (EOFError, OSError):  # the command ended (or closed the pipes) first: nothing to say
         pass
+    # Every figure it drew is a closed file; what is left is the interpreter's teardown of
+    # matplotlib and JAX (~0.4 s that the command would wait for in :meth:`FigureDrawer.close`).
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _loop(stdin, stdout) -> None:
