@@ -235,3 +235,31 @@ def test_residual_is_continuous_where_a_kink_moves_onto_a_breakpoint():
     steps = [np.max(np.abs(residual(m_b + dm) - residual(m_b - dm))) for dm in (1e-5, 1e-6, 1e-7)]
     assert steps[2] < 1e-6, steps  # continuous: the step is the slope times 2 dm
     assert steps[0] / steps[1] > 5 and steps[1] / steps[2] > 5, steps  # and shrinks with dm
+
+
+def test_declared_probes_by_tracing_and_falls_back_for_value_reading_systems():
+    """events.declared answers without running the system (its arguments are tracers: nothing is
+    compiled) and still answers for a system whose event functions read their arguments' values."""
+    import jax
+
+    from hbgear.engine.events import declared
+
+    seen = []
+
+    @register_dataclass
+    @dataclass(frozen=True)
+    class Watching(Gate):
+        def event_functions(self, s, q, qd, p, xp=np):
+            seen.append(isinstance(q, jax.core.Tracer))
+            return super().event_functions(s, q, qd, p, xp)
+
+    @register_dataclass
+    @dataclass(frozen=True)
+    class Reading(Gate):
+        def event_functions(self, s, q, qd, p, xp=np):
+            return xp.asarray(np.asarray(q)[0] - self.gap)[None]  # needs values: fails in a trace
+
+    assert declared(Watching(), W) and seen == [True]
+    assert declared(Reading(), W)
+    assert not declared(GateUndeclared(), W)
+    assert declared(Gate(), jnp.float64(W))
