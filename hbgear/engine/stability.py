@@ -10,8 +10,8 @@ At each point the multipliers come from the cheapest exact route that applies:
   along the harmonic-balance orbits, :data:`VARIATIONAL_POINTS` neighbouring points integrated
   together in one compiled program): the multipliers of the model's equations linearised about
   each orbit, to the integrator's tolerance (:data:`VARIATIONAL_RTOL`). On the NLTV gear pair
-  (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.60-0.64 s for the curve, within
-  6.9e-10 of a run at rtol 1e-12, where Hill's method took 2.0-2.1 s and was 7.8e-4 off (its
+  (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.50-0.56 s for the curve, within
+  3.2e-8 of a run at rtol 1e-12, where Hill's method took 2.0-2.1 s and was 7.8e-4 off (its
   truncation and the sampling of the friction's steep Jacobian); the same stability verdicts.
 - **Hill's method** within :data:`FOLD_WINDOW` points of the branch's folds (`folds`), for
   systems whose force jumps at instants the state decides (declared event functions,
@@ -62,10 +62,13 @@ HILL_MAX_SIZE = 512
 #: Points on either side of a fold that take Hill's method (module docstring).
 FOLD_WINDOW = 8
 
-#: Relative and absolute tolerances of the branch's variational equations (per member of a batch):
-#: the NLTV curve above's multipliers within 6.9e-10 of a run at rtol 1e-12, in 0.60-0.64 s
-#: (0.89-0.96 s at 1e-10, 6.4e-11).
-VARIATIONAL_RTOL, VARIATIONAL_ATOL = 1e-9, 1e-11
+#: Relative and absolute tolerances of the branch's variational equations (per member of a batch).
+#: The orbits they follow are truncated: on the NLTV curve above the multipliers along the H = 32
+#: and H = 64 orbits differ by up to 6.5e-6 (3000 rpm) and by 1.1e-8 at 16000-19000 rpm, so the
+#: integration need not be much finer than that. Against a run at rtol 1e-12 the curve's
+#: multipliers are within 3.2e-8 at rtol 1e-8 (0.50-0.56 s), 6.9e-10 at 1e-9 (0.69-0.78 s),
+#: 5.6e-7 at 1e-7 (0.34-0.38 s), with the same verdicts at every point.
+VARIATIONAL_RTOL, VARIATIONAL_ATOL = 1e-8, 1e-10
 
 #: Points per batched integration of the variational equations. The batch shares its steps
 #: (each member's spikes of the friction's Jacobian sit at its own instants), so larger batches
