@@ -139,60 +139,56 @@ def test_switch_off_and_cost_rule(tmp_path):
     assert not math.isnan(h_max)
 
 
-def test_crossing_located_from_hills_bracket_equals_the_exact_search(monkeypatch):
-    """NLTV arctan, soft spring (the paper's pair), H = 32, N = 256: the -1 crossing near 5270 rpm
-    needs the variational monodromy. Started from Hill's crossing (0.23 rpm off the exact one at
-    this N) it is the crossing of the exact search over the whole segment (to the speed
-    tolerance) for fewer monodromies; a misleading Hill start still ends on it."""
-    from hbgear.engine import bifurcation as frc_command
-    from hbgear.engine import monodromy as stability
+def test_crossings_located_in_step_match_one_by_one_and_scipys_dop853(monkeypatch):
+    """NLTV arctan, soft spring (the paper's pair), H = 32, N = 256: two -1 crossings (near 5270
+    and 5380 rpm) need the variational monodromy. Located together, each step one batched
+    evaluation for both, they are the crossings located one segment at a time (to the speed
+    tolerance) for fewer evaluations; scipy's DOP853 along the same orbits (an integrator that
+    shares no code with the compiled one) puts a multiplier on either side of -1 two tolerances
+    either side of each."""
+    from hbgear.engine import bifurcation
     from hbgear.engine.hb import HarmonicBalance
+    from hbgear.engine.monodromy import monodromy_variational, state_synthesis
     from hbgear.engine.response import newton_solve
     from hbgear.gear.system import GearSystem
 
     model = build_model(load_config(Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml",
                                     ["friction.model='NLTV'", "friction.law='arctan'"]))
+    system = GearSystem(model)
     harmonics, samples = 32, 256
     hb = HarmonicBalance(model.ndof, harmonics, 1, samples)
-    p = rpm_to_rad_s(np.array([5255.0, 5285.0]))
+    p = rpm_to_rad_s(np.array([5255.0, 5285.0, 5370.0, 5395.0]))
     z = np.stack([solve_periodic(model, w, harmonics=harmonics, samples=samples).z for w in p])
-    branch = SimpleNamespace(p=p, z=z)
+    segments = [(p[0], z[0], p[1], z[1]), (p[2], z[2], p[3], z[3])]
     calls = []
-    monodromy = stability.monodromy_variational
-    monkeypatch.setattr(frc_command, "monodromy_variational", lambda *a, **k: calls.append(1) or monodromy(*a, **k))
+    batched = bifurcation.exact_negative_multipliers
+    monkeypatch.setattr(bifurcation, "exact_negative_multipliers", lambda *a, **k: calls.append(1) or batched(*a, **k))
 
-    def locate():
+    def solve(w, z0):
+        return newton_solve(hb, system, w, z0, tolerance=1e-9, max_iterations=30).z
+
+    def locate(parts):
         calls.clear()
-        point, why = frc_command.locate_period_doubling(GearSystem(model), hb, solve, branch.p[0], branch.z[0],
-                                                        branch.p[1], branch.z[1])
-        assert point is not None, why
-        assert point.multiplier == pytest.approx(-1.0, abs=1e-6)
-        return point.p, len(calls)
+        found = bifurcation.locate_period_doublings(system, hb, solve, parts)
+        for point, why in found:
+            assert point is not None, why
+            assert point.multiplier == pytest.approx(-1.0, abs=1e-6)
+        return [point.p for point, _ in found], len(calls)
 
-    def solve(p, z0):
-        return newton_solve(hb, GearSystem(model), p, z0, tolerance=1e-9, max_iterations=30).z
-
-    from_hill, hill_calls = locate()
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda *a: None)
-    exact, exact_calls = locate()
-    assert from_hill == pytest.approx(exact, rel=2e-7)
-    assert rpm_to_rad_s(5255.0) < exact < rpm_to_rad_s(5285.0)
-    assert hill_calls < exact_calls
-    # Hill's slope of the wrong sign (mu + 1 falls with the speed here): stepped out to the segment's end without a sign change, then
-    # the whole segment is searched
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), 1.0, None))
-    fallback, fallback_calls = locate()
-    assert fallback == pytest.approx(exact, rel=2e-7)
-    assert fallback_calls > exact_calls
-    # a solve that fails at Hill's crossing: the whole segment is searched
-    from hbgear.errors import ConvergenceError
-
-    def failing(*a):
-        raise ConvergenceError("not converged (test)")
-
-    monkeypatch.setattr(frc_command, "_hill_crossing", lambda system, hb, solve, pa, pb, *a: (0.5 * (pa + pb), -1e-3, None))
-    monkeypatch.setattr(frc_command, "_exact_bracket", failing)
-    assert locate()[0] == pytest.approx(exact, rel=2e-7)
+    together, calls_together = locate(segments)
+    alone = [locate([segment]) for segment in segments]
+    assert together == pytest.approx([w for (w,), _ in alone], rel=2e-7)
+    assert calls_together < sum(n for _, n in alone)
+    for w, (pa, _, pb, _) in zip(together, segments):
+        assert min(pa, pb) < w < max(pa, pb)
+        sides = np.array([w * (1 - 2e-7), w * (1 + 2e-7)])
+        zs = np.stack([hb.decode(system, solve(x, z[0] if x < p[1] else z[2]))[0] for x in sides])
+        base = np.array([float(hb.base_frequency(system, x)) for x in sides])
+        phi = monodromy_variational(system, sides, state_synthesis(zs, harmonics, base), 1, rtol=1e-11, atol=1e-13,
+                                    integrator="DOP853")
+        mu = [min((m.real for m in np.linalg.eigvals(f) if abs(m.imag) < 1e-9 and m.real < 0), default=np.nan)
+              for f in phi]
+        assert (mu[0] + 1.0) * (mu[1] + 1.0) < 0, (w, mu)
 
 
 def test_nu2_branch_on_the_soft_spring_counts_its_mean_in_the_springs_units(monkeypatch):

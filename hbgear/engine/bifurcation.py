@@ -10,8 +10,8 @@ orders), and the Floquet eigenfunction of the multiplier -1 is the null vector o
 
 - :func:`locate_period_doubling` -- the one locator: the crossing between two branch points, by
   Illinois regula falsi on ``mu + 1`` of the most negative real multiplier from exact or
-  variational monodromy (:func:`exact_negative_multiplier`); where that needs the variational
-  equations, Hill's multipliers (cheap) bracket it first and the exact ones confirm and refine.
+  variational monodromy (:func:`exact_negative_multiplier`); all crossings of a branch in step
+  (:func:`locate_period_doublings`), their multipliers in one batch per step.
 - :func:`follow_period_doubled` -- the one follower: continuation in the half-order amplitude
   ``a = phi . (z - z_*)`` with the parameter as an unknown (regular at the bifurcation whether the
   branch is vertical, super- or subcritical), then an arclength leg in the parameter that stops
@@ -20,19 +20,18 @@ orders), and the Floquet eigenfunction of the multiplier -1 is the null vector o
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Callable, NamedTuple
 
 import numpy as np
 
 from .arrays import device_array
-from .continuation import PseudoArclength, Status, continuation, illinois, sweep_method
-from .floquet import hill_exponents_along, hill_follower, most_negative_real
+from .continuation import PseudoArclength, Status, continuation, sweep_method
+from .continuation.folds import IllinoisBracket
+from .floquet import most_negative_real
 from .hb import HarmonicBalance
 from .metric import arclength_sizes, continuation_functions
 from .monodromy import monodromy_variational, multipliers_linear, state_synthesis
-from .stability import uses_hill
 
 __all__ = [
     "PeriodDoublingPoint",
@@ -194,71 +193,16 @@ def exact_negative_multiplier(system, hb: HarmonicBalance, z, p) -> float:
 #: ``rtol`` of the variational monodromy (DOP853) of the exact multipliers (per member of a batch).
 VARIATIONAL_RTOL = 1e-10
 
-#: Smallest first step (relative) from Hill's crossing towards the exact one (:func:`_exact_bracket`).
-HILL_MIN_STEP = 1e-6
-
-#: Hill's crossing is located to this (relative) before the exact multipliers are asked (each
-#: Hill evaluation, seeded from the last, is ~100x cheaper than a variational monodromy).
-HILL_TOLERANCE = 1e-9
-
-#: Half-width of the bracket around the predicted exact crossing, in units of the tolerance (on
-#: the NLTV pair, H = 32, N = 1024, the predictions were within 1.2e-10 relative of the crossings
-#: the exact search finds, the bracket ends 1e-8 relative away).
-PREDICTED_HALF_WIDTH = 0.1
+#: A failed or non-finite multiplier counts as ``mu + 1 = 1`` (no crossing there).
+_NO_CROSSING = 1.0
 
 
-def _exact_bracket(g, w0, slope, pa, pb, g0=None):
-    """``(a, g(a)..., b, g(b)...)`` with a sign change of the exact ``g``, from Hill's crossing
-    `w0` (its exact ``g``, ``(value, data)``, if known): the next point is the exact crossing
-    predicted with Hill's `slope`, overshot by half (at least ``HILL_MIN_STEP`` away), then steps
-    four times longer until the sign changes; ``None`` at the end of the segment ``[pa, pb]``
-    without one."""
-    low, high = min(pa, pb), max(pa, pb)
-    g0, d0 = g(w0) if g0 is None else g0
-    if g0 == 0:
-        return w0, g0, d0, w0, g0, d0
-    step = -1.5 * g0 / slope if slope != 0 and np.isfinite(slope) else 0.0
-    step = math.copysign(max(abs(step), HILL_MIN_STEP * abs(w0)), step)
-    while True:
-        w1 = min(max(w0 + step, low), high)
-        g1, d1 = g(w1)
-        if g0 * g1 <= 0:
-            return w0, g0, d0, w1, g1, d1
-        if w1 in (low, high):
-            return None
-        step *= 4.0
+def _g(mu) -> float:
+    return float(mu) + 1.0 if np.isfinite(mu) else _NO_CROSSING
 
 
-def _hill_crossing(system, hb, solve, pa, pb, tolerance, max_steps):
-    """``(p, slope, z)``: the -1 crossing of Hill's most negative real multiplier between `pa`
-    and `pb` (to `tolerance` relative), the slope of its ``mu + 1`` there and the solution at
-    ``p``, or ``None`` when Hill's multipliers do not bracket a crossing there (or fail). Each
-    evaluation is seeded from the one before (:func:`~hbgear.engine.floquet.hill_exponents_along`,
-    without the linear predictor: the iterates are not evenly spaced); the slope is the secant of
-    the closest two evaluations on either side at least ``100 tolerance`` apart."""
-    follower = hill_follower(hb, system, predict=False)
-    seen = []
-
-    def g(w):
-        z = solve(w)
-        (_, mult), = hill_exponents_along(hb, z[None], [w], system, follower)
-        mu = most_negative_real(mult)
-        value = mu + 1.0 if np.isfinite(mu) else 1.0
-        seen.append((w, value))
-        return value, z
-
-    try:
-        (ga, za), (gb, _) = g(pa), g(pb)
-        if ga * gb > 0:
-            return None
-        (w, z, _), _ = illinois(g, pa, ga, pb, gb, (pa, za, ga), tolerance, max_steps)
-    except Exception:  # noqa: BLE001 -- Hill only starts the search; the exact multipliers decide
-        return None
-    below = [(x, v) for x, v in seen if (v < 0) == (ga < 0)]
-    above = [(x, v) for x, v in seen if (v < 0) != (ga < 0)]
-    pairs = [(abs(a - b), a, va, b, vb) for a, va in below for b, vb in above if abs(a - b) >= 100 * tolerance * abs(w)]
-    _, a, va, b, vb = min(pairs) if pairs else (0.0, pa, ga, pb, gb)
-    return w, (vb - va) / (b - a), z
+def _converged(bracket, g_best: float, tolerance: float) -> bool:
+    return g_best == 0 or abs(bracket.b - bracket.a) <= tolerance * max(abs(bracket.a), abs(bracket.b))
 
 
 def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segments, *, tolerance: float = 1e-7,
@@ -266,126 +210,96 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
     """The -1 crossings between pairs of branch points, ``segments``: ``(pa, za, pb, zb)`` each
     (``nu = 1`` unknowns of `hb`).
 
-    Illinois regula falsi on ``mu + 1`` (:func:`exact_negative_multiplier`) in the parameter, to
-    `tolerance` relative; `solve(p, z0) -> z` converges a ``nu = 1`` solution at `p` from `z0`
-    (started from the straight line between the two points, so it stays on this branch even where
-    the curve is multivalued; for a linear system, whose multipliers do not depend on the solution,
-    only at the crossing found). Where the multiplier needs the variational equations (a batch of
-    them costs about one) the crossing of Hill's multipliers (cheap while its matrices are at
-    most :data:`~hbgear.engine.stability.HILL_MAX_SIZE` square) is located first, to
-    :data:`HILL_TOLERANCE`; the exact multipliers there (one batch for all segments) and Hill's
-    slope predict each exact crossing, and the exact multipliers on either side of it,
-    :data:`PREDICTED_HALF_WIDTH` tolerances away (a second batch), confirm it when they differ in
-    sign: the crossing is then bracketed to the tolerance. Otherwise that segment is searched
-    from Hill's crossing, stepped out until the exact multipliers change sign, then by Illinois;
-    without Hill's crossing, over the whole segment. Hill's crossing is off the exact one by its
-    truncation and sampling error (2e-6 relative at H = 32, N = 1024 on the NLTV gear pair).
+    Illinois regula falsi on ``g = mu + 1`` (``mu`` the most negative real multiplier,
+    :func:`exact_negative_multipliers`) in the parameter, to `tolerance` relative, all segments
+    in step: each step converges one solution per unfinished segment with `solve(p, z0) -> z`
+    (started from the straight line between the segment's points, so it stays on this branch
+    even where the curve is multivalued; a linear system's multipliers do not depend on the
+    solution, so there it is solved only at the crossing found) and asks their multipliers in
+    one batched evaluation (the variational equations of a batch share their steps: on the NLTV
+    pair, H = 32, one to eight members cost the same 17-19 ms). The ends' multipliers come in one
+    batch first. On the NLTV pair's four crossings this took 0.3 s where Hill's crossings first,
+    then the exact multipliers to confirm them, took 0.65-0.78 s.
 
     **Returns:** one ``(PeriodDoublingPoint, None)`` or ``(None, reason)`` per segment (reason:
-    the exact multipliers do not confirm a crossing between the points, or what failed).
+    the multipliers at the points do not change sign across -1, or what failed).
     """
     segments = [(float(pa), np.asarray(za, dtype=float), float(pb), np.asarray(zb, dtype=float))
                 for pa, za, pb, zb in segments]
-
-    def on_segment(k):
-        pa, za, pb, zb = segments[k]
-
-        def solve_on_segment(w):
-            t = 0.0 if pb == pa else (w - pa) / (pb - pa)
-            return solve(w, (1 - t) * za + t * zb)
-
-        return solve_on_segment
-
-    out: list = [None] * len(segments)
-    hills: dict = {}
-    if system.linearization() is None and uses_hill(hb):  # (large Hill problems: the exact multipliers alone)
-        for k, (pa, _, pb, _) in enumerate(segments):
-            hill = _hill_crossing(system, hb, on_segment(k), pa, pb, HILL_TOLERANCE, max_steps)
-            if hill is not None:
-                w, slope, z = hill
-                try:
-                    hills[k] = (w, slope, on_segment(k)(w) if z is None else z)
-                except Exception:  # noqa: BLE001 -- a solve that fails at Hill's crossing: the whole segment
-                    pass
-    exact_at_hill: dict = {}
-    if hills:
-        order = list(hills)
-        try:
-            values = exact_negative_multipliers(system, hb, [hills[k][2] for k in order], [hills[k][0] for k in order])
-        except Exception:  # noqa: BLE001 -- each segment is then searched on its own
-            values = None
-        if values is not None:
-            exact_at_hill = {k: ((v + 1.0 if np.isfinite(v) else 1.0), (hills[k][2], v)) for k, v in zip(order, values)}
-            out = _confirm_predicted(system, hb, segments, on_segment, hills, exact_at_hill, tolerance, out)
-    for k in range(len(segments)):
-        if out[k] is None:
-            out[k] = _locate_one(system, hb, on_segment(k), segments[k], hills.get(k), exact_at_hill.get(k), tolerance,
-                                 max_steps)
-    return out
-
-
-def _confirm_predicted(system, hb, segments, on_segment, hills, exact_at_hill, tolerance, out):
-    """The segments whose exact crossing, predicted from Hill's, the exact multipliers on either
-    side of the prediction confirm (one batched evaluation): their results in `out`."""
-    trial = []
-    for k, (w_hill, slope, _) in hills.items():
-        g0 = exact_at_hill[k][0]
-        if not (np.isfinite(slope) and slope != 0):
-            continue
-        centre = w_hill - g0 / slope
-        half = PREDICTED_HALF_WIDTH * tolerance * abs(centre)
-        pa, _, pb, _ = segments[k]
-        if min(pa, pb) <= centre - half and centre + half <= max(pa, pb):
-            trial += [(k, centre - half), (k, centre + half)]
-    if not trial:
-        return out
-    try:
-        zs = [on_segment(k)(w) for k, w in trial]
-        values = exact_negative_multipliers(system, hb, zs, [w for _, w in trial])
-    except Exception:  # noqa: BLE001 -- those segments are searched one by one
-        return out
-    for j in range(0, len(trial), 2):
-        k = trial[j][0]
-        g_lo, g_hi = values[j] + 1.0, values[j + 1] + 1.0
-        if np.isfinite(g_lo) and np.isfinite(g_hi) and g_lo * g_hi <= 0:
-            best = j if abs(g_lo) <= abs(g_hi) else j + 1
-            pa, _, pb, _ = segments[k]
-            out[k] = (PeriodDoublingPoint(float(trial[best][1]), zs[best], float(values[best]), (pa, pb)), None)
-    return out
-
-
-def _locate_one(system, hb, solve_on_segment, segment, hill, exact_at_hill, tolerance, max_steps):
-    """One segment's crossing by the exact multipliers: bracketed from Hill's crossing (`hill`,
-    with its exact ``g`` if known) where there is one, else over the whole segment; then Illinois."""
-    pa, _, pb, _ = segment
     solution_free = system.linearization() is system  # the multipliers do not depend on the solution
+    out: list = [None] * len(segments)
 
-    def g(w):
-        z = None if solution_free else solve_on_segment(w)
-        mu = exact_negative_multiplier(system, hb, z, w)
-        return (mu + 1.0 if np.isfinite(mu) else 1.0), (z, mu)
+    def solve_on(k, w):
+        pa, za, pb, zb = segments[k]
+        t = 0.0 if pb == pa else (w - pa) / (pb - pa)
+        return solve(w, (1 - t) * za + t * zb)
 
-    try:
-        bracket = None
-        if hill is not None:
-            try:
-                bracket = _exact_bracket(g, hill[0], hill[1], pa, pb, exact_at_hill)
-            except Exception:  # noqa: BLE001 -- a solve that fails near Hill's crossing: the whole segment
-                bracket = None
-        if bracket is None:
-            bracket = (pa, *g(pa), pb, *g(pb))
-        lo, ga, da, hi, gb, db = bracket
+    def failed(k, exc) -> None:
+        out[k] = (None, f"locating the crossing failed: {type(exc).__name__}: {exc}")
+
+    def multipliers(keys, zs, ws) -> dict:
+        """``{k: mu}`` for the keys whose multiplier could be computed (one batch; point by
+        point if the batch fails, a point that fails then ends its segment's search)."""
+        try:
+            return dict(zip(keys, exact_negative_multipliers(system, hb, zs, ws)))
+        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+            done = {}
+            for k, z, w in zip(keys, zs, ws):
+                try:
+                    done[k] = exact_negative_multipliers(system, hb, [z], [w])[0]
+                except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+                    failed(k, exc)
+            return done
+
+    ends = multipliers([(k, side) for k in range(len(segments)) for side in (0, 1)],
+                       [s[1 + 2 * side] for s in segments for side in (0, 1)],
+                       [s[2 * side] for s in segments for side in (0, 1)])
+    brackets, best = {}, {}
+    for k, (pa, za, pb, zb) in enumerate(segments):
+        if (k, 0) not in ends or (k, 1) not in ends:
+            if out[k] is None:
+                out[k] = (None, "locating the crossing failed: the multipliers at the segment's points")
+            continue
+        (mu_a, mu_b) = ends[k, 0], ends[k, 1]
+        ga, gb = _g(mu_a), _g(mu_b)
         if ga * gb > 0:
-            return None, (f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the "
-                          f"exact/variational monodromy does not confirm (most negative real multipliers "
-                          f"{da[1]:.6g}, {db[1]:.6g})")
-        (w, (z, mu), _), _ = illinois(g, lo, ga, hi, gb, (lo, da, ga) if abs(ga) < abs(gb) else (hi, db, gb),
-                                      tolerance, max_steps)
-        if z is None:
-            z = solve_on_segment(w)
-    except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
-        return None, f"locating the crossing failed: {type(exc).__name__}: {exc}"
-    return PeriodDoublingPoint(float(w), z, float(mu), (float(pa), float(pb))), None
+            out[k] = (None, f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the "
+                            f"exact/variational monodromy does not confirm (most negative real multipliers "
+                            f"{mu_a:.6g}, {mu_b:.6g})")
+            continue
+        brackets[k] = IllinoisBracket(pa, ga, pb, gb)
+        best[k] = (pa, za, mu_a, ga) if abs(ga) <= abs(gb) else (pb, zb, mu_b, gb)
+    for _ in range(max_steps):
+        active = [k for k in brackets if out[k] is None and not _converged(brackets[k], best[k][3], tolerance)]
+        if not active:
+            break
+        trial, zs = {}, {}
+        for k in active:
+            w = brackets[k].point()
+            try:
+                zs[k] = None if solution_free else solve_on(k, w)
+                trial[k] = w
+            except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+                failed(k, exc)
+        keys = list(trial)
+        values = multipliers(keys, [zs[k] for k in keys], [trial[k] for k in keys]) if keys else {}
+        for k, mu in values.items():
+            gc = _g(mu)
+            if abs(gc) <= abs(best[k][3]):
+                best[k] = (trial[k], zs[k], mu, gc)
+            brackets[k] = brackets[k].narrowed(trial[k], gc)
+    for k in brackets:
+        if out[k] is not None:
+            continue
+        w, z, mu, _ = best[k]
+        pa, _, pb, _ = segments[k]
+        try:
+            z = solve_on(k, w) if z is None else z
+        except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
+            failed(k, exc)
+            continue
+        out[k] = (PeriodDoublingPoint(float(w), z, float(mu), (pa, pb)), None)
+    return out
 
 
 def locate_period_doubling(system, hb: HarmonicBalance, solve: Callable, pa: float, za, pb: float, zb, *,
