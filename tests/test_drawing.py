@@ -43,6 +43,30 @@ def test_the_helper_draws_the_same_files_as_this_process_and_each_figure_once(tm
     assert sorted(p.name for p in there.iterdir()) == sorted(p.name for p in expected)  # no temporary left
 
 
+def test_the_helper_starts_while_this_process_works_and_finish_draws_the_rest(tmp_path):
+    """start() hands the list over and returns at once; the helper draws meanwhile (here: all of
+    them, this process being busy); finish() draws what is left and returns every path."""
+    import time
+
+    with FigureDrawer(helper=True) as drawer:
+        _wait_ready(drawer)
+        jobs = _jobs(tmp_path, 3)
+        drawer.start(jobs)
+        deadline = time.monotonic() + 120.0
+        while not all(job.path.exists() for job in jobs) and time.monotonic() < deadline:
+            time.sleep(0.05)  # "writing the tables"
+        assert all(job.path.exists() for job in jobs)
+        paths = drawer.finish()
+        assert drawer.drawn_by_helper == 3
+        assert paths == [job.path for job in jobs]
+        with pytest.raises(RuntimeError):
+            drawer.finish()  # nothing started
+        drawer.start(_jobs(tmp_path, 2))
+        with pytest.raises(RuntimeError):
+            drawer.start(_jobs(tmp_path, 2))  # the last start is not finished
+        assert len(drawer.finish()) == 2
+
+
 def test_a_figure_that_fails_in_the_helper_raises_here_after_the_others(tmp_path):
     jobs = _jobs(tmp_path, 4)
     jobs[0] = FigureJob(harris_figure, jobs[0].args, {}, tmp_path / "missing" / "harris_0.png", {"dpi": 60})
@@ -91,16 +115,20 @@ def test_hbgear_frc_writes_the_same_files_with_the_helper_as_without(tmp_path, m
     from hbgear.outputs import drawing
 
     seen = []
-    draw = drawing.FigureDrawer.draw
+    start, finish = drawing.FigureDrawer.start, drawing.FigureDrawer.finish
 
-    def draw_when_ready(self, jobs):
+    def start_when_ready(self, jobs):
         if self.has_helper:
             assert self.wait_ready(120.0)
-        paths = draw(self, jobs)
+        start(self, jobs)
+
+    def finish_and_count(self):
+        paths = finish(self)
         seen.append((self.has_helper, self.drawn_by_helper, len(paths)))
         return paths
 
-    monkeypatch.setattr(drawing.FigureDrawer, "draw", draw_when_ready)
+    monkeypatch.setattr(drawing.FigureDrawer, "start", start_when_ready)
+    monkeypatch.setattr(drawing.FigureDrawer, "finish", finish_and_count)
     config = Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"
     sets = ["solver.harmonics=8", "solver.time_samples=64", "sweep.speed_rpm_start=12000", "sweep.speed_rpm_stop=12600"]
     outs = {}

@@ -194,22 +194,9 @@ def _run(config, args, out_dir, drawer, t0) -> int:
     curve = frc_curve(config, stability=not args.no_stability, period_doubling=flag,
                       progress=False if args.no_progress else None)
     t_done = time.perf_counter()
-    write_csv_atomic(out_dir / "frc.csv", curve.columns, [[row[c] for c in curve.columns] for row in curve.rows()])
-    if curve.response.stability is not None:
-        write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, curve.floquet_rows())
     count, order_rule = _order_count(config, curve)
     orders = curve.mesh_orders(count)
-    write_csv_atomic(out_dir / "orders.csv", *curve.order_rows(orders))
-    method = sweep_method(rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop),
-                          None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm))
-    t_out = time.perf_counter()
-    timings = dict(curve.timings_s) | {"per_point_ms": 1e3 * curve.timings_s["continuation"] / max(curve.points - 1, 1),
-                                       "outputs": t_out - t_done, "total": t_out - t0}
-    write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings,
-                                                     {"mesh_orders": orders, "rule": order_rule}))
     modes = curve.natural_frequencies()
-    write_json_atomic(out_dir / "modes.json", {"model": "mean mesh stiffness, no friction, undamped",
-                                               "modes": modes.records(float(curve.model.teeth_pinion), (1, 2, 3))})
     png = {"dpi": 120}
     jobs = [FigureJob(curve.plot, (), {}, out_dir / "frc.png", png),
             FigureJob(curve.plot_orders, (orders,), {}, out_dir / "orders.png", png),
@@ -225,7 +212,21 @@ def _run(config, args, out_dir, drawer, t0) -> int:
                            out_dir / f"bearing_orders_{name}.png", png) for name in BEARING_FORCES]
     if curve.response.stability is not None:
         jobs.append(FigureJob(curve.plot_floquet, (), {}, out_dir / "floquet.png", png))
-    drawer.draw(jobs)
+    drawer.start(jobs)  # the helper draws while this process writes the tables
+    write_csv_atomic(out_dir / "frc.csv", curve.columns, [[row[c] for c in curve.columns] for row in curve.rows()])
+    if curve.response.stability is not None:
+        write_csv_atomic(out_dir / "floquet.csv", FLOQUET_COLUMNS, curve.floquet_rows())
+    write_csv_atomic(out_dir / "orders.csv", *curve.order_rows(orders))
+    method = sweep_method(rpm_to_rad_s(sw.speed_rpm_start), rpm_to_rad_s(sw.speed_rpm_stop),
+                          None if sw.step_rpm is None else rpm_to_rad_s(sw.step_rpm))
+    t_out = time.perf_counter()
+    timings = dict(curve.timings_s) | {"per_point_ms": 1e3 * curve.timings_s["continuation"] / max(curve.points - 1, 1),
+                                       "outputs": t_out - t_done, "total": t_out - t0}
+    write_json_atomic(out_dir / "frc.json", _summary(curve, config, args, asdict(method), timings,
+                                                     {"mesh_orders": orders, "rule": order_rule}))
+    write_json_atomic(out_dir / "modes.json", {"model": "mean mesh stiffness, no friction, undamped",
+                                               "modes": modes.records(float(curve.model.teeth_pinion), (1, 2, 3))})
+    drawer.finish()
     if not curve.success:
         raise ConvergenceError(
             f"frc continuation from {sw.speed_rpm_start:g} to {sw.speed_rpm_stop:g} rpm (H={curve.harmonics}, "

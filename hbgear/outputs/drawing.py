@@ -7,7 +7,9 @@ take ~1 s, a quarter of the LTV example's command, and a thread cannot share tha
 caller's script as :mod:`multiprocessing` would do), which imports matplotlib and the modules
 the figures need while the computation runs. At :meth:`FigureDrawer.draw` the helper takes
 figures from the front of the list and this process from the back, each figure whole, until
-none is left: both cores draw.
+none is left: both cores draw. :meth:`~FigureDrawer.start` then :meth:`~FigureDrawer.finish`
+is the same in two halves: the helper starts on the figures while this process writes its
+tables, then this process draws what is left.
 
 Every file is written by :func:`~hbgear.outputs.io.save_figure_atomic` in whichever process
 draws it (never half-written). A figure that fails in the helper raises here, as it would have
@@ -128,6 +130,21 @@ def _usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+class _Batch:
+    """One :meth:`FigureDrawer.start`'s figures: which are left (`pending`), which the helper is
+    drawing (`taken`), which it took and did not finish (`lost`: it died), the results."""
+
+    def __init__(self, jobs):
+        self.jobs = jobs
+        self.pending = deque(range(len(jobs)))
+        self.taken: set = set()
+        self.lost: list = []
+        self.paths: list = [None] * len(jobs)
+        self.errors: dict = {}
+        self.turn = threading.Condition()
+        self.shared = False  # the helper has the list
+
+
 class FigureDrawer:
     """Draws :class:`FigureJob` lists with a helper process (module docstring).
 
@@ -136,7 +153,7 @@ class FigureDrawer:
     CPUs are usable and ``HBGEAR_FIGURE_PROCESS`` is not ``0``; ``False`` never; ``True``
     always. A context manager; or call :meth:`close`.
 
-    **Attributes:** `drawn_by_helper`: figures of the last :meth:`draw` the helper drew.
+    **Attributes:** `drawn_by_helper`: figures of the last :meth:`draw` (or :meth:`start`) the helper drew.
     """
 
     def __init__(self, modules: Sequence[str] = (), *, helper: bool | None = None):
@@ -144,6 +161,7 @@ class FigureDrawer:
             helper = os.environ.get("HBGEAR_FIGURE_PROCESS", "1").strip() != "0" and _usable_cpus() >= 2
         self._process = None
         self._ready = False
+        self._batch = None
         self.drawn_by_helper = 0
         if helper:
             self._process = self._start(tuple(BASE_MODULES) + tuple(modules))
@@ -193,70 +211,87 @@ class FigureDrawer:
 
         **Returns:** the paths written, in the order of `jobs`. **Raises:** the exception of the
         first failing job (in the order of `jobs`), after every other job has finished."""
+        self.start(jobs)
+        return self.finish()
+
+    def start(self, jobs: Sequence[FigureJob]) -> None:
+        """Hand `jobs` to the helper, which starts on them from the front at once, and return:
+        this process may do other work (write tables) before :meth:`finish` draws the rest."""
+        if self._batch is not None:
+            raise RuntimeError("FigureDrawer.start: the figures of the last start are not finished")
         jobs = list(jobs)
         self.drawn_by_helper = 0
+        batch = _Batch(jobs)
+        self._batch = batch
         if self._process is None or len(jobs) < 2:
-            return [job.run() for job in jobs]
+            return
         try:
             blob = pickle.dumps(jobs, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception:  # noqa: BLE001 -- something does not pickle: draw here
-            return [job.run() for job in jobs]
-        pending = deque(range(len(jobs)))
-        taken: set = set()  # indices the helper is drawing
-        lost: list = []  # indices the helper took but did not finish (it died)
-        paths: list = [None] * len(jobs)
-        errors: dict = {}
-        turn = threading.Condition()
+            return
+        batch.shared = True
+        threading.Thread(target=self._feed, args=(batch, blob), name="hbgear-figures", daemon=True).start()
 
-        def feed():  # this thread talks to the helper; it is never waited for beyond the figures it took
-            process = self._process
-            try:
-                if not self._ready:
-                    if pickle.load(process.stdout) != "ready":
-                        raise EOFError
-                    self._ready = True
-                process.stdin.write(blob)
-                process.stdin.flush()
-                while True:
-                    _, result = pickle.load(process.stdout)
-                    with turn:
-                        if result is not None:
-                            index, path, error = result
-                            if error is None:
-                                paths[index] = Path(path)
-                                self.drawn_by_helper += 1
-                            else:
-                                errors[index] = pickle.loads(error)
-                            taken.discard(index)
-                        index = pending.popleft() if pending else None
-                        if index is not None:
-                            taken.add(index)
-                        turn.notify_all()
-                    pickle.dump(index, process.stdin)
-                    process.stdin.flush()
-                    if index is None:
-                        return
-            except Exception:  # noqa: BLE001 -- the helper is gone: what it took is drawn here
-                with turn:
-                    lost.extend(taken)
-                    taken.clear()
-                    turn.notify_all()
-                self._stop()
+    def finish(self) -> list[Path]:
+        """Draw what the helper has not taken (from the back), wait for what it took.
 
-        threading.Thread(target=feed, name="hbgear-figures", daemon=True).start()
-        while True:
+        **Returns**, **Raises:** as :meth:`draw`."""
+        batch, self._batch = self._batch, None
+        if batch is None:
+            raise RuntimeError("FigureDrawer.finish without start")
+        jobs, paths, errors, turn = batch.jobs, batch.paths, batch.errors, batch.turn
+        if not batch.shared:
+            for index in range(len(jobs)):
+                self._run_here(jobs, index, paths, errors)
+        while batch.shared:
             with turn:
-                if not pending:
+                if not batch.pending:
                     break
-                index = pending.pop()
+                index = batch.pending.pop()
             self._run_here(jobs, index, paths, errors)
         with turn:
-            turn.wait_for(lambda: not taken)
-        for index in lost:
+            turn.wait_for(lambda: not batch.taken)
+        for index in batch.lost:
             self._run_here(jobs, index, paths, errors)
         if errors:
             raise errors[min(errors)]
         return paths
+
+    def _feed(self, batch, blob) -> None:
+        """The thread that talks to the helper; it is never waited for beyond the figures it took."""
+        process, turn = self._process, batch.turn
+        try:
+            if not self._ready:
+                if pickle.load(process.stdout) != "ready":
+                    raise EOFError
+                self._ready = True
+            process.stdin.write(blob)
+            process.stdin.flush()
+            while True:
+                _, result = pickle.load(process.stdout)
+                with turn:
+                    if result is not None:
+                        index, path, error = result
+                        if error is None:
+                            batch.paths[index] = Path(path)
+                            self.drawn_by_helper += 1
+                        else:
+                            batch.errors[index] = pickle.loads(error)
+                        batch.taken.discard(index)
+                    index = batch.pending.popleft() if batch.pending else None
+                    if index is not None:
+                        batch.taken.add(index)
+                    turn.notify_all()
+                pickle.dump(index, process.stdin)
+                process.stdin.flush()
+                if index is None:
+                    return
+        except Exception:  # noqa: BLE001 -- the helper is gone: what it took is drawn here
+            with turn:
+                batch.lost.extend(batch.taken)
+                batch.taken.clear()
+                turn.notify_all()
+            self._stop()
 
     @staticmethod
     def _run_here(jobs, index, paths, errors) -> None:
