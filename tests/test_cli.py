@@ -1,5 +1,6 @@
 """hbgear.cli: the command framework, exit codes, one-line errors, no files on bad input."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -220,6 +221,21 @@ def test_console_script_flushes_what_was_printed_and_keeps_the_status():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode == 5
     assert result.stdout == "x" * 200000 + "END" and result.stderr == "END"
+
+
+@pytest.mark.parametrize("how", ["plain", "profiled", "asked"])
+def test_console_script_ends_normally_under_a_profiler_or_when_asked(how):
+    """Profilers and coverage write their reports at exit: under one (or with
+    HBGEAR_FAST_EXIT=0) the atexit handlers run; otherwise the process ends at once."""
+    code = ("import atexit, sys, hbgear.cli as cli\n"
+            "atexit.register(lambda: print('atexit ran'))\n"
+            "cli.main = lambda: 0\n"
+            + ("sys.setprofile(lambda *a: None)\n" if how == "profiled" else "")
+            + "cli.console_main()\n")
+    env = dict(os.environ, HBGEAR_FAST_EXIT="0" if how == "asked" else "1")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
+    assert result.returncode == 0
+    assert ("atexit ran" in result.stdout) == (how != "plain")
 
 
 # ----------------------------------------------------------------------------- hbgear validate as a gate

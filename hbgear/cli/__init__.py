@@ -276,10 +276,15 @@ def console_main() -> NoReturn:
     (written atomically), so nothing is left for the interpreter's shutdown but tearing down
     JAX's runtime and the imported modules: 0.3-0.4 s of the LTV example's ~5 s, skipped here
     (``os._exit`` after flushing the standard streams and the logging handlers). :func:`main`
-    itself returns, for callers in Python."""
+    itself returns, for callers in Python. The process ends normally (its ``atexit`` handlers
+    run) under a profiler or tracer (``python -m cProfile -m hbgear``, pyinstrument, coverage),
+    which write their reports at exit, and with ``HBGEAR_FAST_EXIT=0``."""
     import os
 
     status = main()
+    if (sys.getprofile() is not None or sys.gettrace() is not None
+            or os.environ.get("HBGEAR_FAST_EXIT", "1").strip() == "0"):
+        sys.exit(status)
     jax = sys.modules.get("jax")
     if jax is not None:
         with contextlib.suppress(Exception):
