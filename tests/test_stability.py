@@ -219,6 +219,9 @@ def test_variational_monodromy_batch_equals_the_members_alone():
     other = build_model(config("friction.model='NLTV'", "friction.law='arctan'", "gear.contact_ratio=1.5"))
 
     class TwoGeometries(GearSystem):
+        coefficients_independent_of_parameter = False  # its breakpoints depend on p (a system that
+        # declares them independent is taken at its word: the first member's serve the batch)
+
         def breakpoints(self, p, xp=np):
             return (other if p > omegas[0] else m).breakpoint_candidates(xp)
 

@@ -427,13 +427,23 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
     n = system.ndof
     if integrator not in ("auto", "compiled", "DOP853"):
         raise ValueError(f"monodromy_variational: integrator = {integrator!r}; allowed: 'auto', 'compiled', 'DOP853'")
+    # M and the breakpoints of a system that declares them independent of p are those of the first
+    # member (per member they were ~0.1 s of the NLTV curve's 0.5 s of stability)
+    same_for_all = bool(getattr(system, "coefficients_independent_of_parameter", False))
     bp = _segments(system, float(ps[0]))
-    if any(not np.array_equal(_segments(system, float(x)), bp) for x in ps[1:]):
+    if not same_for_all and any(not np.array_equal(_segments(system, float(x)), bp) for x in ps[1:]):
         raise ValueError("monodromy_variational: the members of a batch must have the same breakpoints")
     edges = np.unique(np.concatenate([(j + bp) / nu for j in range(nu)]))
     size = max(VARIATIONAL_BATCH, 1 << (members - 1).bit_length()) if batch else 1  # padded: few programs
     pad = np.minimum(np.arange(size), members - 1)
-    minv = np.stack([np.linalg.inv(np.asarray(system.mass_matrix(float(x), np), dtype=float)) for x in ps])[pad]
+
+    def inverse_mass(x):
+        return np.linalg.inv(np.asarray(system.mass_matrix(float(x), np), dtype=float))
+
+    if same_for_all:
+        minv = np.repeat(inverse_mass(ps[0])[None], size, axis=0)
+    else:
+        minv = np.stack([inverse_mass(x) for x in ps])[pad]
     base_period = (nu * 2.0 * np.pi / np.array([float(system.excitation_frequency(float(x))) for x in ps]))[pad]
     compiled = integrator == "compiled" or (integrator == "auto" and isinstance(state, StateSynthesis))
     if compiled:
