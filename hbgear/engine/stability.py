@@ -10,7 +10,7 @@ At each point the multipliers come from the cheapest exact route that applies:
   along the harmonic-balance orbits, :data:`VARIATIONAL_POINTS` neighbouring points integrated
   together in one compiled program): the multipliers of the model's equations linearised about
   each orbit, to the integrator's tolerance (:data:`VARIATIONAL_RTOL`). On the NLTV gear pair
-  (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.50-0.56 s for the curve, within
+  (arctan, H = 32, N = 1024, 756 points over 3000-20000 rpm) 0.35-0.55 s for the curve, within
   3.2e-8 of a run at rtol 1e-12, where Hill's method took 2.0-2.1 s and was 7.8e-4 off (its
   truncation and the sampling of the friction's steep Jacobian); the same stability verdicts.
 - **Hill's method** within :data:`FOLD_WINDOW` points of the branch's folds (`folds`), for
