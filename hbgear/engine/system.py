@@ -74,7 +74,8 @@ shapes returned, ``is_linear`` at a probe state):
   relative to ``force_scale``).
 - ``coefficients_independent_of_parameter = False`` -- ``M``, the breakpoints and the periodic
   stiffness and damping of ``Q_lin`` do not depend on ``p`` (only the forcing and the frequency
-  do): the operator is then built once per system.
+  do): the operator is then built once per system, and a batch of variational equations takes
+  ``M`` and the breakpoints of its first member.
 - ``forcing_affine_in_frequency = False`` -- ``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``
   (the forcing is then combined from two quadratures; checked at a third value).
 - ``nonlinear_force_uses_displacement = True`` -- ``False`` when ``Q_nl`` depends on ``q'`` only
