@@ -191,6 +191,36 @@ def test_crossings_located_in_step_match_one_by_one_and_scipys_dop853(monkeypatc
         assert (mu[0] + 1.0) * (mu[1] + 1.0) < 0, (w, mu)
 
 
+def test_a_segment_whose_multipliers_fail_is_reported_and_the_others_located(monkeypatch):
+    """LTV (the multipliers do not depend on the solution: nothing is solved): the batch with a
+    failing point is redone point by point; that segment says what failed, the other one is
+    located (at the crossing the example's frc reports, 5268.05 rpm)."""
+    from hbgear.engine import bifurcation
+    from hbgear.engine.hb import HarmonicBalance
+    from hbgear.gear.system import GearSystem
+
+    model = build_model(load_config(Path(__file__).resolve().parents[1] / "examples" / "paper_table1.toml"))
+    system = GearSystem(model)
+    hb = HarmonicBalance(model.ndof, 8, 1, 64)
+    p = rpm_to_rad_s(np.array([5250.0, 5290.0, 5370.0, 5395.0]))
+    zero = np.zeros(hb.size)
+    exact = bifurcation.exact_negative_multipliers
+
+    def failing_at_the_second_segment(system, hb, zs, ps):
+        if any(abs(w - p[2]) < 1e-9 for w in ps):
+            raise RuntimeError("no multiplier here (test)")
+        return exact(system, hb, zs, ps)
+
+    monkeypatch.setattr(bifurcation, "exact_negative_multipliers", failing_at_the_second_segment)
+
+    (first, why_first), (second, why) = bifurcation.locate_period_doublings(
+        system, hb, lambda w, z0: zero, [(p[0], zero, p[1], zero), (p[2], zero, p[3], zero)])
+    assert first is not None, why_first
+    assert first.p == pytest.approx(rpm_to_rad_s(5268.05), rel=2e-6)
+    assert first.multiplier == pytest.approx(-1.0, abs=1e-6)
+    assert second is None and why.startswith("locating the crossing failed: RuntimeError: no multiplier here")
+
+
 def test_nu2_branch_on_the_soft_spring_counts_its_mean_in_the_springs_units(monkeypatch):
     """On the soft output spring with formulation B friction the spring's mean wind-up follows
     the response ``spring_stiffness_ratio`` (5e5) times more than the mesh; the ``nu = 2`` branch

@@ -201,10 +201,6 @@ def _g(mu) -> float:
     return float(mu) + 1.0 if np.isfinite(mu) else _NO_CROSSING
 
 
-def _converged(bracket, g_best: float, tolerance: float) -> bool:
-    return g_best == 0 or abs(bracket.b - bracket.a) <= tolerance * max(abs(bracket.a), abs(bracket.b))
-
-
 def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segments, *, tolerance: float = 1e-7,
                             max_steps: int = 40) -> list:
     """The -1 crossings between pairs of branch points, ``segments``: ``(pa, za, pb, zb)`` each
@@ -218,8 +214,9 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
     solution, so there it is solved only at the crossing found) and asks their multipliers in
     one batched evaluation (the variational equations of a batch share their steps: on the NLTV
     pair, H = 32, one to eight members cost the same 17-19 ms). The ends' multipliers come in one
-    batch first. On the NLTV pair's four crossings this took 0.3 s where Hill's crossings first,
-    then the exact multipliers to confirm them, took 0.65-0.78 s.
+    batch first. On the NLTV pair's four crossings (H = 32, N = 1024) 0.36-0.48 s in a warm
+    process, where Hill's crossings first, then the exact multipliers to confirm them, took
+    0.52-0.57 s.
 
     **Returns:** one ``(PeriodDoublingPoint, None)`` or ``(None, reason)`` per segment (reason:
     the multipliers at the points do not change sign across -1, or what failed).
@@ -237,30 +234,29 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
     def failed(k, exc) -> None:
         out[k] = (None, f"locating the crossing failed: {type(exc).__name__}: {exc}")
 
-    def multipliers(keys, zs, ws) -> dict:
-        """``{k: mu}`` for the keys whose multiplier could be computed (one batch; point by
-        point if the batch fails, a point that fails then ends its segment's search)."""
+    def multipliers(segment_of, zs, ws) -> list:
+        """The multipliers at the points (one batch; point by point if the batch fails: a point
+        that fails ends the search of its segment, ``segment_of[i]``, and is ``None``)."""
         try:
-            return dict(zip(keys, exact_negative_multipliers(system, hb, zs, ws)))
+            return list(exact_negative_multipliers(system, hb, zs, ws))
         except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
-            done = {}
-            for k, z, w in zip(keys, zs, ws):
+            done = []
+            for k, z, w in zip(segment_of, zs, ws):
                 try:
-                    done[k] = exact_negative_multipliers(system, hb, [z], [w])[0]
+                    done.append(exact_negative_multipliers(system, hb, [z], [w])[0])
                 except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
                     failed(k, exc)
+                    done.append(None)
             return done
 
-    ends = multipliers([(k, side) for k in range(len(segments)) for side in (0, 1)],
+    ends = multipliers([k for k in range(len(segments)) for _ in (0, 1)],
                        [s[1 + 2 * side] for s in segments for side in (0, 1)],
                        [s[2 * side] for s in segments for side in (0, 1)])
     brackets, best = {}, {}
     for k, (pa, za, pb, zb) in enumerate(segments):
-        if (k, 0) not in ends or (k, 1) not in ends:
-            if out[k] is None:
-                out[k] = (None, "locating the crossing failed: the multipliers at the segment's points")
+        if out[k] is not None:  # an end's multiplier failed
             continue
-        (mu_a, mu_b) = ends[k, 0], ends[k, 1]
+        mu_a, mu_b = ends[2 * k], ends[2 * k + 1]
         ga, gb = _g(mu_a), _g(mu_b)
         if ga * gb > 0:
             out[k] = (None, f"the multipliers flagged a crossing between p = {pa:.9g} and {pb:.9g} that the "
@@ -270,7 +266,7 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
         brackets[k] = IllinoisBracket(pa, ga, pb, gb)
         best[k] = (pa, za, mu_a, ga) if abs(ga) <= abs(gb) else (pb, zb, mu_b, gb)
     for _ in range(max_steps):
-        active = [k for k in brackets if out[k] is None and not _converged(brackets[k], best[k][3], tolerance)]
+        active = [k for k in brackets if out[k] is None and best[k][3] != 0 and not brackets[k].within(tolerance)]
         if not active:
             break
         trial, zs = {}, {}
@@ -282,8 +278,10 @@ def locate_period_doublings(system, hb: HarmonicBalance, solve: Callable, segmen
             except Exception as exc:  # noqa: BLE001 -- reported, the nu = 1 curve is kept
                 failed(k, exc)
         keys = list(trial)
-        values = multipliers(keys, [zs[k] for k in keys], [trial[k] for k in keys]) if keys else {}
-        for k, mu in values.items():
+        values = multipliers(keys, [zs[k] for k in keys], [trial[k] for k in keys]) if keys else []
+        for k, mu in zip(keys, values):
+            if mu is None:
+                continue
             gc = _g(mu)
             if abs(gc) <= abs(best[k][3]):
                 best[k] = (trial[k], zs[k], mu, gc)

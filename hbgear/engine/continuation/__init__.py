@@ -47,7 +47,7 @@ from .branch import MESSAGES, Branch, PointKind, Status  # noqa: F401
 from .compiled import _JIT_CACHE, SEGMENT_POINTS, _Compiled, _jit_corrector  # noqa: F401
 from .corrector import CHORD_ITERATION_WORK, _python_corrector  # noqa: F401
 from .driver import continuation, solve_at_parameter
-from .folds import IllinoisBracket, illinois  # noqa: F401
+from .folds import IllinoisBracket  # noqa: F401
 from .options import PseudoArclength, sweep_method
 
 __all__ = ["PseudoArclength", "continuation", "solve_at_parameter", "sweep_method", "Branch", "Status", "PointKind"]

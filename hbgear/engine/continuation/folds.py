@@ -1,6 +1,6 @@
 """Fold location (Illinois regula falsi on the tangent's ``p``-component) and the
-:class:`IllinoisBracket` / :func:`illinois` root bracketing it uses (also used by the gear
-pair's period-doubling search)."""
+:class:`IllinoisBracket` it uses (also the period-doubling search's,
+:func:`hbgear.engine.bifurcation.locate_period_doublings`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import NamedTuple
 
 from .corrector import _Point
 
-__all__ = ["IllinoisBracket", "illinois"]
+__all__ = ["IllinoisBracket"]
 
 
 class IllinoisBracket(NamedTuple):
@@ -27,29 +27,14 @@ class IllinoisBracket(NamedTuple):
     def point(self) -> float:
         return (self.a * self.fb - self.b * self.fa) / (self.fb - self.fa)
 
+    def within(self, rel_tol: float) -> bool:
+        """Whether the bracket is at most `rel_tol` wide, relative to ``max(|a|, |b|)``."""
+        return abs(self.b - self.a) <= rel_tol * max(abs(self.a), abs(self.b))
+
     def narrowed(self, c: float, fc: float) -> IllinoisBracket:
         if fc * self.fa > 0:
             return IllinoisBracket(c, fc, self.b, self.fb * 0.5 if self.side == -1 else self.fb, -1)
         return IllinoisBracket(self.a, self.fa * 0.5 if self.side == 1 else self.fa, c, fc, 1)
-
-
-def illinois(g, a, ga, b, gb, best, rel_tol, max_steps):
-    """Illinois regula falsi on ``g(x) -> (value, data)`` from the bracket ``(a, ga), (b, gb)``
-    until it is below `rel_tol` (relative to ``max(|a|, |b|)``) or a value is 0.
-
-    **Returns:** the best ``(x, data, value)`` seen (`best`: the better end's, same form) and
-    the last :class:`IllinoisBracket`.
-    """
-    bracket = IllinoisBracket(a, ga, b, gb)
-    for _ in range(max_steps):
-        if abs(bracket.b - bracket.a) <= rel_tol * max(abs(bracket.a), abs(bracket.b)) or best[2] == 0:
-            break
-        c = bracket.point()
-        gc, data = g(c)
-        if abs(gc) <= abs(best[2]):
-            best = (c, data, gc)
-        bracket = bracket.narrowed(c, gc)
-    return best, bracket
 
 
 def _locate_fold(correct, y0, t0, y1, g1, max_iter, max_steps=40):
