@@ -343,7 +343,7 @@ def _variational_program():
 
             y0 = jnp.tile(jnp.eye(2 * n).ravel(), size)
             y, steps, ok = integrate_segments(f, y0, starts, ends, (starts, phase_starts, phase_lo, phase_hi),
-                                              rtol, atol)
+                                              rtol, atol, max_steps=COMPILED_MAX_STEPS)
             return y.reshape(size, 2 * n, 2 * n), steps, ok
 
         # it closes over nothing: its traced program may be kept on disk
@@ -429,7 +429,7 @@ def monodromy_variational(system, p, state, nu: int = 1, *, rtol: float = 1e-10,
         raise ValueError(f"monodromy_variational: integrator = {integrator!r}; allowed: 'auto', 'compiled', 'DOP853'")
     # M and the breakpoints of a system that declares them independent of p are those of the first
     # member (per member they were ~0.1 s of the NLTV curve's 0.5 s of stability)
-    same_for_all = bool(getattr(system, "coefficients_independent_of_parameter", False))
+    same_for_all = bool(system.coefficients_independent_of_parameter)
     bp = _segments(system, float(ps[0]))
     if not same_for_all and any(not np.array_equal(_segments(system, float(x)), bp) for x in ps[1:]):
         raise ValueError("monodromy_variational: the members of a batch must have the same breakpoints")

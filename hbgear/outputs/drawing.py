@@ -123,13 +123,6 @@ def _loop(stdin, stdout) -> None:
 HELPER_EXIT_S = 5.0
 
 
-def _usable_cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 class _Batch:
     """One :meth:`FigureDrawer.start`'s figures: which are left (`pending`), which the helper is
     drawing (`taken`), which it took and did not finish (`lost`: it died), the results."""
@@ -158,7 +151,9 @@ class FigureDrawer:
 
     def __init__(self, modules: Sequence[str] = (), *, helper: bool | None = None):
         if helper is None:
-            helper = os.environ.get("HBGEAR_FIGURE_PROCESS", "1").strip() != "0" and _usable_cpus() >= 2
+            from ..tasks import available_workers  # the CPUs this process may run on
+
+            helper = os.environ.get("HBGEAR_FIGURE_PROCESS", "1").strip() != "0" and available_workers() >= 2
         self._process = None
         self._ready = False
         self._batch = None
