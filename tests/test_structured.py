@@ -21,12 +21,12 @@ from hbgear.build import build_model
 from hbgear.config import load_config
 from hbgear.engine import fourier
 from hbgear.engine.floquet import hill_multipliers
-from hbgear.engine.hb import HarmonicBalance
-from hbgear.engine.krylov import gmres
+from hbgear.engine.hb import HarmonicBalance, residual_functions
+from hbgear.engine.krylov import gmres, gmres_traced
 from hbgear.engine.newton import newton
 from hbgear.engine.quadrature import (fourier_coefficients, lattice_coefficients, lattice_rule, lattice_synthesis,
                                       mesh_period_rule)
-from hbgear.engine.structured import product_samples
+from hbgear.engine.structured import BORDERED_RTOL, KrylovJacobian, product_samples
 from hbgear.engine.system import Duffing
 from hbgear.engine.response import solution_multipliers as engine_multipliers
 from hbgear.gear.monodromy import floquet_multipliers
@@ -300,3 +300,95 @@ def test_starved_krylov_solves_end_in_a_convergence_error_not_a_wrong_answer(mon
     with pytest.raises(ConvergenceError, match="GMRES products") as error:
         solve_periodic(gear("NLTV"), rpm_to_rad_s(3000.0), harmonics=16, samples=72, max_iterations=5)
     assert "residual" in str(error.value)
+
+
+# -- the continuation on the structured path (KrylovJacobian, bordered GMRES in the compiled corrector)
+
+
+def test_traced_gmres_is_the_numpy_one_with_restarts_and_reports_when_it_does_not_converge():
+    """:func:`gmres_traced` (compiled) reaches the same iterate as :func:`gmres` with restarts, its
+    converged flag read on the true residual; starved of products it says so and returns the best
+    iterate with its true relative residual; a zero right-hand side is solved by zero."""
+    rng = np.random.default_rng(4)
+    n = 120
+    a = np.diag(np.linspace(1.0, 20.0, n)) + rng.normal(size=(n, n)) / np.sqrt(n)
+    b = rng.normal(size=n)
+    d = np.diag(a).copy()
+    exact = np.linalg.solve(a, b)
+
+    def run(b, rtol, restart, max_products):
+        solve = jax.jit(lambda b: gmres_traced(lambda v: jnp.asarray(a) @ v, b, precondition=lambda v: v / d,
+                                               rtol=rtol, restart=restart, max_products=max_products))
+        x, info = solve(jnp.asarray(b))
+        return np.asarray(x), info
+
+    for restart in (7, 200):
+        x, info = run(b, 1e-11, restart, 2000)
+        assert bool(info.converged) and np.linalg.norm(a @ x - b) <= 1e-11 * np.linalg.norm(b)
+        np.testing.assert_allclose(x, exact, rtol=0, atol=1e-9 * np.max(np.abs(exact)))
+        theirs, _ = gmres(lambda v: a @ (v / d), b, precondition=lambda v: v / d, rtol=1e-11, restart=restart,
+                          max_iterations=2000)
+        np.testing.assert_allclose(x, theirs, rtol=0, atol=1e-9 * np.max(np.abs(exact)))
+    x, info = run(b, 1e-14, 5, 10)
+    assert not bool(info.converged) and int(info.iterations) == 10
+    assert float(info.relative_residual) == pytest.approx(np.linalg.norm(a @ x - b) / np.linalg.norm(b), rel=1e-9)
+    x, info = run(np.zeros(n), 1e-10, 5, 10)
+    assert bool(info.converged) and int(info.iterations) == 0 and not np.any(x)
+
+
+@pytest.mark.parametrize("case", ["NLTV", "LTV"])
+def test_krylov_jacobian_and_its_bordered_solve_are_the_dense_ones(case):
+    """The continuation's form of the structured Jacobian: its matrix is the dense path's
+    ``dR/dz`` (1e-10), ``scaled(sizes)`` is ``dR/dz diag(sizes)``, and the bordered solve by GMRES
+    solves the dense bordered matrix to the tolerance it is given (:data:`BORDERED_RTOL`)."""
+    model = gear(case)
+    system, omega, harmonics, samples = GearSystem(model), rpm_to_rad_s(9000.0), 12, 56
+    dense, structured = pair(model.ndof, harmonics, samples)
+    rj_d, _, args_d = residual_functions(dense, system)
+    rj_s, _, args_s = residual_functions(structured, system)
+    z = solve_periodic(model, omega, harmonics=harmonics, samples=samples).z * 1.02
+    r1, j1, p1 = (np.asarray(x) for x in rj_d(jnp.asarray(z), omega, *args_d))
+    r2, jac, p2 = rj_s(jnp.asarray(z), omega, *args_s)
+    assert isinstance(jac, KrylovJacobian)
+    scale = np.max(np.abs(j1))
+    np.testing.assert_allclose(np.asarray(jac.dense()), j1, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(np.asarray(r2), r1, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(p2), p1, rtol=0, atol=1e-10 * np.max(np.abs(p1)))
+    sizes = 1.0 + np.random.default_rng(7).random(dense.size) * 10
+    np.testing.assert_allclose(np.asarray(jac.scaled(jnp.asarray(sizes)).dense()), j1 * sizes[None, :], rtol=0,
+                               atol=1e-10 * scale * np.max(sizes))
+    rng = np.random.default_rng(8)
+    # a border row near the continuation's own (a unit tangent is mostly its p-component here)
+    column, row, b = p1 * omega, np.append(0.1 * rng.normal(size=dense.size), 1.0), rng.normal(size=dense.size + 1)
+    x = np.asarray(jax.jit(lambda j, c, r, b: j.bordered_factor(c, r).solve(b))(jac, column, row, b))
+    bordered = np.block([[j1, column[:, None]], [row[None]]])
+    assert np.linalg.norm(bordered @ x - b) <= 1.0001 * BORDERED_RTOL * np.linalg.norm(b)
+    np.testing.assert_allclose(x, np.linalg.solve(bordered, b), rtol=0, atol=1e-7 * np.max(np.abs(x)))
+
+
+def test_continuation_on_the_structured_path_is_the_dense_curve():
+    """The compiled chord corrector with bordered GMRES solves (the structured path) follows the
+    dense LU's curve -- the NLTV pair on its soft output spring, continued in the scaled unknowns
+    of the arclength metric -- the same points to 1e-10 with the same iterations, and each point
+    solves the dense equations (residual within the tolerance)."""
+    from hbgear.engine.continuation import continuation, sweep_method
+    from hbgear.engine.metric import continuation_functions
+
+    model = gear("NLTV")
+    system, harmonics, samples = GearSystem(model), 8, 40
+    p0, p1 = rpm_to_rad_s(6000.0), rpm_to_rad_s(6600.0)
+    branches = []
+    for hb in pair(model.ndof, harmonics, samples):
+        rj, r, args, sizes = continuation_functions(hb, system, p0)
+        assert sizes is not None  # the soft spring's mean in its own size
+        branches.append(continuation(rj, r, np.zeros(hb.size), p0, p1, sweep_method(p0, p1, None), args=args,
+                                     tolerance=1e-11, progress=False))
+    theirs, ours = branches
+    assert theirs.success and ours.success and len(ours.p) == len(theirs.p) > 10
+    np.testing.assert_array_equal(ours.iterations, theirs.iterations)
+    np.testing.assert_allclose(ours.p, theirs.p, rtol=1e-10)
+    np.testing.assert_allclose(ours.z, theirs.z, rtol=0, atol=1e-10 * np.max(np.abs(theirs.z)))
+    dense = pair(model.ndof, harmonics, samples)[0]
+    sizes = continuation_functions(dense, system, p0)[3]
+    for z, p in zip(ours.z[::5], ours.p[::5]):
+        assert np.max(np.abs(np.asarray(dense.residual(jnp.asarray(z * sizes), p, system)))) <= 1e-11

@@ -28,7 +28,10 @@ The Hill eigenproblem of a solution is ``(J + lam D1 + lam^2 D2) v = 0`` with
 Many harmonics: from :data:`STRUCTURED_MIN_SIZE` unknowns on, :meth:`HarmonicBalance.prepare`
 builds the structured path instead (:mod:`hbgear.engine.structured`: the same residual by FFT
 products, Newton steps by preconditioned GMRES, no ``(size x size)`` array);
-:meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose.
+:meth:`HarmonicBalance.residual_and_linearization` hands Newton whichever Jacobian the size chose,
+and the continuation corrector (:func:`residual_functions`) gets the Jacobian as a
+:class:`~hbgear.engine.structured.KrylovJacobian`, its bordered systems solved by GMRES inside the
+compiled corrector.
 
 Many coordinates, few of them nonlinear: for a system that declares an ``input_map`` the
 prepared pieces hold the condensed path (:mod:`hbgear.engine.condensed`, chosen by
@@ -57,6 +60,7 @@ from .typed_jit import typed_jit
 
 
 __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "JumpLayout", "residual_functions",
+           "jacobian_is_structured",
            "STRUCTURED_MIN_SIZE", "CONDENSED_MIN_SIZE"]
 
 #: From this many unknowns ``n (2H+1)`` on, ``operator="auto"`` takes the structured path
@@ -66,9 +70,11 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
 #: Newton step dense / structured: 0.9 / 2.7 ms at 258 unknowns (H = 64), 6.2 / 6.4 ms at 514,
 #: 36.6 / 7.9 ms at 1026, 274 / 15 ms at 2050 (an earlier run: 1.1 / 2.6, 3.7 / 6.5, 30.5 / 8.7,
 #: 181 / 14 ms): the crossover lies between 514 and 1026 unknowns. Below
-#: it the dense step is also exact and Hill's method and continuation, which need the dense
-#: Jacobian, keep their frozen matrices; above it the dense LU grows like size^3, its matrices
-#: like size^2.
+#: it the dense step is also exact and Hill's method, which needs the dense Jacobian, keeps its
+#: frozen matrices; above it the dense LU grows like size^3, its matrices like size^2. The
+#: continuation crosses over at the same size: per point of `examples/low_speed_nltv.toml`
+#: (200-230 rpm, 107 points), dense chord LU / bordered GMRES 36.9 / 31.8 ms at 1026 unknowns
+#: (H = 256), 204 / 70 ms at 2050 (H = 512).
 STRUCTURED_MIN_SIZE = 1000
 
 #: From this many unknowns on (and below :data:`STRUCTURED_MIN_SIZE`), ``operator="auto"`` takes
@@ -771,6 +777,17 @@ class HarmonicBalance:
         :class:`~hbgear.engine.condensed.PortJacobian` (`prepared` must hold the condensed pieces)."""
         return self._residual_and_port_jacobians_jit(z, p, system, prepared)
 
+    def residual_and_krylov_jacobians(self, z, p, system, prepared):
+        """``(R, dR/dz, dR/dp)`` on the structured path: ``dR/dz`` as a
+        :class:`~hbgear.engine.structured.KrylovJacobian` (products; the continuation corrector
+        solves its bordered systems by GMRES). `prepared` must hold the structured pieces."""
+        return self._residual_and_krylov_jacobians_jit(z, p, system, prepared)
+
+    @_kept_method
+    def _residual_and_krylov_jacobians_jit(self, z, p, system, prepared):
+        r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
+        return r, structured.krylov_jacobian(self, z, p, system, prepared), jp
+
     @_kept_method
     def _residual_and_port_jacobians_jit(self, z, p, system, prepared):
         r, jp = jax.jvp(lambda pp: self._residual(z, pp, system, prepared), (p,), (jnp.ones_like(p),))
@@ -910,6 +927,8 @@ def _functions_of(hb: HarmonicBalance):
     def residual_and_jacobians(z, p, system, prepared):
         if prepared.condensed is not None:  # dR/dz as a PortJacobian (hbgear.engine.condensed)
             return hb.residual_and_port_jacobians(device_array(z), p, system, prepared)
+        if prepared.structured is not None:  # as a KrylovJacobian (hbgear.engine.structured)
+            return hb.residual_and_krylov_jacobians(device_array(z), p, system, prepared)
         return hb.residual_and_jacobians(device_array(z), p, system, prepared)
 
     def residual(z, p, system, prepared):
@@ -917,9 +936,16 @@ def _functions_of(hb: HarmonicBalance):
 
     # what the compiled corrector asks before tracing (hbgear.engine.continuation.compiled); all
     # they close over is `hb` (frozen settings): programs traced from them may be kept on disk
-    residual_and_jacobians.jacobian_is_structured = lambda system, prepared: prepared.condensed is not None
+    residual_and_jacobians.jacobian_is_structured = lambda system, prepared: jacobian_is_structured(prepared)
     residual_and_jacobians.program_key = residual.program_key = ("engine.hb._functions_of", hb)
     return residual_and_jacobians, residual
+
+
+def jacobian_is_structured(prepared) -> bool:
+    """Whether the continuation's ``dR/dz`` on these `prepared` pieces is an object (a
+    :class:`~hbgear.engine.condensed.PortJacobian` or a :class:`~hbgear.engine.structured.KrylovJacobian`)
+    rather than a matrix."""
+    return prepared.condensed is not None or prepared.structured is not None
 
 
 def _breakpoint_key(system, p) -> tuple:

@@ -18,7 +18,7 @@ from functools import lru_cache
 import jax.numpy as jnp
 import numpy as np
 
-from .hb import HarmonicBalance, residual_functions
+from .hb import HarmonicBalance, _functions_of, jacobian_is_structured, residual_functions
 
 __all__ = ["arclength_sizes", "sized_functions_of", "continuation_functions"]
 
@@ -45,17 +45,18 @@ def arclength_sizes(hb: HarmonicBalance, system, p) -> np.ndarray | None:
 def sized_functions_of(hb: HarmonicBalance):
     """:func:`~hbgear.engine.hb.residual_functions` in the unknowns ``y = z / sizes`` (`sizes`
     the last extra argument): ``R(sizes y)`` and its Jacobian ``R_z diag(sizes)``."""
+    plain, _ = _functions_of(hb)
+
     def residual_and_jacobians(y, p, system, prepared, sizes):
-        if prepared.condensed is not None:  # a PortJacobian (hbgear.engine.condensed): its scaled form
-            res, jz, jp = hb.residual_and_port_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
+        res, jz, jp = plain(jnp.asarray(y) * sizes, p, system, prepared)
+        if jacobian_is_structured(prepared):  # a PortJacobian or a KrylovJacobian: its scaled form
             return res, jz.scaled(jnp.asarray(sizes)), jp
-        res, jz, jp = hb.residual_and_jacobians(jnp.asarray(y) * sizes, p, system, prepared)
         return res, jz * sizes[None, :], jp
 
     def residual(y, p, system, prepared, sizes):
         return hb.residual(jnp.asarray(y) * sizes, p, system, prepared)
 
-    residual_and_jacobians.jacobian_is_structured = lambda system, prepared, sizes: prepared.condensed is not None
+    residual_and_jacobians.jacobian_is_structured = lambda system, prepared, sizes: jacobian_is_structured(prepared)
     # all they close over is `hb` (frozen settings): programs traced from them may be kept on disk
     residual_and_jacobians.program_key = residual.program_key = ("engine.metric.sized_functions_of", hb)
     return residual_and_jacobians, residual

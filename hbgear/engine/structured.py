@@ -34,10 +34,17 @@ inverted once per linearisation (``O(H n^3)``). GMRES (:mod:`hbgear.engine.krylo
 (:func:`hbgear.engine.newton.newton`: inexact Newton, Eisenstat--Walker forcing terms).
 
 The harmonic-balance object decides by size (:attr:`hbgear.engine.hb.HarmonicBalance.structured`).
+
+**Continuation.** The compiled corrector (:mod:`hbgear.engine.continuation.compiled`) takes the
+Jacobian as a :class:`KrylovJacobian` (the same products) and solves each bordered system
+``[[J, dR/dp], [row]]`` by GMRES inside its program (:func:`~hbgear.engine.krylov.gmres_traced`,
+no return to Python per product), right-preconditioned by the mean Jacobian bordered with the
+same column and row (:class:`KrylovFactor`), to :data:`BORDERED_RTOL`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -47,12 +54,12 @@ import numpy as np
 
 from . import fourier
 from .arrays import device_array
-from .krylov import KrylovInfo, gmres
+from .krylov import KrylovInfo, gmres, gmres_traced
 from .persistent import persistent
 from .typed_jit import typed_jit
 
-__all__ = ["StructuredOperator", "Linearization", "StructuredJacobian", "prepare_structured", "product_samples",
-           "linear_response", "linearize"]
+__all__ = ["StructuredOperator", "Linearization", "StructuredJacobian", "KrylovJacobian", "KrylovFactor",
+           "prepare_structured", "product_samples", "linear_response", "linearize", "linearization"]
 
 #: GMRES settings of a Newton step: Krylov vectors kept before a restart, products at most.
 RESTART = 80
@@ -196,6 +203,12 @@ def _kept_linearization(function):
 
 @_kept_linearization
 def _linearize_jit(hb, z, p, system, prepared):
+    return linearization(hb, z, p, system, prepared)
+
+
+def linearization(hb, z, p, system, prepared) -> Linearization:
+    """The :class:`Linearization` at ``(z, p)`` (traceable): derivative samples, coefficient
+    samples, the inverted mean-Jacobian blocks."""
     x, extra = hb._split(system, z)
     _, stiffness, damping = _operator_samples(hb, system, p, prepared)
     derivatives = at_c = weight = delta = None
@@ -276,3 +289,100 @@ def linearize(hb, z, p, system, prepared):
     inverted blocks: one compiled evaluation)."""
     r = hb._residual_jit(z, p, system, prepared)
     return r, StructuredJacobian(hb, system.free_mean_dof, _linearize_jit(hb, z, p, system, prepared))
+
+
+# ----------------------------------------------------------------------------- the continuation's form
+
+#: The continuation corrector's bordered solves (:meth:`KrylovFactor.solve`, inside its compiled
+#: program): GMRES to this relative residual, at most :data:`BORDERED_MAX_PRODUCTS` products in
+#: cycles of :data:`RESTART`; a solve that stops above :data:`BORDERED_USABLE_RTOL` gives NaN
+#: (the corrector then reports a failed step or, for the tangent, takes the SVD fallback).
+BORDERED_RTOL = 1e-10
+BORDERED_MAX_PRODUCTS = 400
+BORDERED_USABLE_RTOL = 1e-6
+
+
+@partial(jax.tree_util.register_dataclass, data_fields=["linearization", "sizes"],
+         meta_fields=["hb", "free_slot"])
+@dataclass(frozen=True)
+class KrylovJacobian:
+    """``dR/dz diag(sizes)`` at one point as products (a pytree, traced by the compiled
+    continuation corrector, :mod:`hbgear.engine.continuation.compiled`): the structured path's
+    :class:`Linearization` with the interface of :class:`~hbgear.engine.condensed.PortJacobian`
+    (:meth:`bordered_factor`, :meth:`dense`, :meth:`scaled`).
+
+    **Fields:** `hb` (static), `free_slot` (static: the free mean coordinate or ``None``),
+    `linearization`, `sizes` ``(size,)`` or ``None`` (the column scaling of
+    :func:`hbgear.engine.metric.arclength_sizes`).
+    """
+
+    hb: Any
+    free_slot: Any
+    linearization: Linearization
+    sizes: Any = None
+
+    def matvec(self, v):
+        """``J diag(sizes) v``."""
+        return _product(self.hb, self.free_slot, self.linearization, v if self.sizes is None else v * self.sizes)
+
+    def precondition(self, v):
+        """``(Jbar diag(sizes))^{-1} v``: the mean-Jacobian blocks' solve."""
+        lin = self.linearization
+        out = _precondition(self.hb, lin.inverse_mean, lin.inverse_blocks, v)
+        return out if self.sizes is None else out / self.sizes
+
+    def scaled(self, sizes) -> KrylovJacobian:
+        """``J diag(sizes)``: the same products on scaled directions."""
+        return replace(self, sizes=sizes if self.sizes is None else self.sizes * sizes)
+
+    def dense(self):
+        """The matrix (``size`` products; the SVD fallback of a failed tangent, the Python corrector)."""
+        return jax.vmap(self.matvec, in_axes=1, out_axes=1)(jnp.eye(self.hb.size))
+
+    def bordered_factor(self, column, row) -> KrylovFactor:
+        """The :class:`KrylovFactor` of ``[[J, column], [row]]``: its preconditioner bordered
+        by the same column and row (``Jbar^{-1} column`` and the Schur complement, once)."""
+        z_column = self.precondition(column)
+        schur = row[-1] - row[:-1] @ z_column
+        schur = jnp.where(jnp.abs(schur) > 1e-300, schur, 1.0)  # a degenerate border: the block diagonal
+        return KrylovFactor(self, column, row, z_column, schur)
+
+
+class KrylovFactor(NamedTuple):
+    r"""The bordered matrix ``B = [[J, column], [row]]`` of a continuation step, for solves by
+    GMRES (:func:`~hbgear.engine.krylov.gmres_traced`) with the bordered mean Jacobian on the
+    right,
+
+    .. math:: P = \begin{pmatrix} \bar J & c \\ r_z^T & r_p \end{pmatrix},\quad
+        P^{-1} \begin{pmatrix} u \\ s \end{pmatrix} = \begin{pmatrix} a - \bar J^{-1} c\, y \\ y \end{pmatrix},
+        \quad a = \bar J^{-1} u,\; y = \frac{s - r_z \cdot a}{r_p - r_z \cdot \bar J^{-1} c}
+
+    (block elimination on the mean Jacobian, which is regular where ``J`` folds). A pytree."""
+
+    jacobian: KrylovJacobian
+    column: Any
+    row: Any
+    z_column: Any  # Jbar^{-1} column
+    schur: Any  # row_p - row_z . Jbar^{-1} column
+
+    def apply(self, v):
+        """``B v``."""
+        return jnp.append(self.jacobian.matvec(v[:-1]) + self.column * v[-1], self.row @ v)
+
+    def precondition(self, v):
+        """``P^{-1} v``."""
+        a = self.jacobian.precondition(v[:-1])
+        y = (v[-1] - self.row[:-1] @ a) / self.schur
+        return jnp.append(a - self.z_column * y, y)
+
+    def solve(self, b):
+        """``B^{-1} b`` to :data:`BORDERED_RTOL` (NaN where GMRES stops above :data:`BORDERED_USABLE_RTOL`)."""
+        x, info = gmres_traced(self.apply, b, precondition=self.precondition, rtol=BORDERED_RTOL, restart=RESTART,
+                               max_products=BORDERED_MAX_PRODUCTS)
+        return jnp.where(info.relative_residual <= BORDERED_USABLE_RTOL, x, jnp.nan)
+
+
+def krylov_jacobian(hb, z, p, system, prepared) -> KrylovJacobian:
+    """``dR/dz`` at ``(z, p)`` as a :class:`KrylovJacobian` (traceable; the continuation's form of
+    the structured path)."""
+    return KrylovJacobian(hb, system.free_mean_dof, linearization(hb, z, p, system, prepared))

@@ -16,9 +16,10 @@ residual's extra ``args`` (the gear pair) are arguments of the program, so a new
 pair of the same structure does not recompile.
 
 The Jacobian ``R_z`` is a matrix, or an object with ``bordered_factor(column, row)`` (a
-:class:`~hbgear.engine.condensed.PortJacobian`: a factorisation with ``solve(b)``, and ``dense()``);
-then every LU of a bordered matrix below is that factorisation (:func:`_factor_bordered`,
-:func:`_solve_bordered`), the same algorithm on cheaper linear algebra.
+:class:`~hbgear.engine.condensed.PortJacobian`, a :class:`~hbgear.engine.structured.KrylovJacobian`:
+a factorisation with ``solve(b)``, and ``dense()``); then every LU of a bordered matrix below is
+that factorisation (:func:`_factor_bordered`, :func:`_solve_bordered`: Woodbury on the ports, or
+GMRES with the bordered mean Jacobian), the same algorithm on cheaper linear algebra.
 
 The loop states are NamedTuples (JAX pytrees), their fields in alphabetical order. XLA copies a
 loop variable that a ``lax.cond`` branch passes through while the other makes a new one, so the
