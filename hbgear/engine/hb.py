@@ -64,7 +64,7 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
            "STRUCTURED_MIN_SIZE", "CONDENSED_MIN_SIZE"]
 
 #: From this many unknowns ``n (2H+1)`` on, ``operator="auto"`` takes the structured path
-#: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the mean-Jacobian preconditioner,
+#: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the band preconditioner,
 #: no ``(size x size)`` array); below it the dense Jacobian and its LU. Measured on the NLTV gear
 #: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores, one BLAS thread), one
 #: Newton step dense / structured: 0.9 / 2.7 ms at 258 unknowns (H = 64), 6.2 / 6.4 ms at 514,
@@ -820,8 +820,7 @@ class HarmonicBalance:
             g_q, g_v, t_q, t_v, rest = self._nonlinear_port_parts(x, extra, p, system, prepared.jumps, pieces.ports.T,
                                                                   pieces.outputs, w)
             # A holds the mean derivatives of Q_nl too (a mesh that is all nonlinear, backlash,
-            # leaves Kb no stiffness on its coordinate): the mean Jacobian, as the structured
-            # path's preconditioner
+            # leaves Kb no stiffness on its coordinate): the mean Jacobian
             k_bar, c_bar = k_bar - g_q @ pieces.ports, c_bar - g_v @ pieces.ports
             # U~ = P_K + w P_C - (T_q + w T_v D_1): the convolution parts gathered at once from
             # the coefficients' differences, the jump terms apart

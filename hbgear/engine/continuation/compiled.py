@@ -19,7 +19,7 @@ The Jacobian ``R_z`` is a matrix, or an object with ``bordered_factor(column, ro
 :class:`~hbgear.engine.condensed.PortJacobian`, a :class:`~hbgear.engine.structured.KrylovJacobian`:
 a factorisation with ``solve(b)``, and ``dense()``); then every LU of a bordered matrix below is
 that factorisation (:func:`_factor_bordered`, :func:`_solve_bordered`: Woodbury on the ports, or
-GMRES with the bordered mean Jacobian), the same algorithm on cheaper linear algebra.
+GMRES with the bordered band preconditioner), the same algorithm on cheaper linear algebra.
 
 The loop states are NamedTuples (JAX pytrees), their fields in alphabetical order. XLA copies a
 loop variable that a ``lax.cond`` branch passes through while the other makes a new one, so the
