@@ -67,14 +67,14 @@ __all__ = ["HarmonicBalance", "Prepared", "FrozenOperator", "ForcingPieces", "Ju
 #: (:mod:`hbgear.engine.structured`: FFT products, GMRES with the band preconditioner,
 #: no ``(size x size)`` array); below it the dense Jacobian and its LU. Measured on the NLTV gear
 #: pair at 200 rpm (``benchmarks/bench_large_harmonics.py``, 2 cores, one BLAS thread), one
-#: Newton step dense / structured: 0.9 / 2.7 ms at 258 unknowns (H = 64), 6.2 / 6.4 ms at 514,
-#: 36.6 / 7.9 ms at 1026, 274 / 15 ms at 2050 (an earlier run: 1.1 / 2.6, 3.7 / 6.5, 30.5 / 8.7,
-#: 181 / 14 ms): the crossover lies between 514 and 1026 unknowns. Below
-#: it the dense step is also exact and Hill's method, which needs the dense Jacobian, keeps its
-#: frozen matrices; above it the dense LU grows like size^3, its matrices like size^2. The
-#: continuation crosses over at the same size: per point of `examples/low_speed_nltv.toml`
-#: (200-230 rpm, 107 points), dense chord LU / bordered GMRES 36.9 / 31.8 ms at 1026 unknowns
-#: (H = 256), 204 / 70 ms at 2050 (H = 512).
+#: Newton step dense / structured with the band preconditioner: 1.4 / 2.8 ms at 258 unknowns
+#: (H = 64), 5.1 / 3.1 ms at 514, 29.4 / 4.6 ms at 1026, 199 / 7.7 ms at 2050; a continuation
+#: point (`examples/low_speed_nltv.toml`, 200-230 rpm, 107 points; dense chord LU / bordered
+#: GMRES): 6.0 / 6.2 ms at 514, 39.2 / 13.1 ms at 1026, 204 / 27 ms at 2050. The crossover lies
+#: near 520 unknowns; the rule stays at 1000 so that the gear pair's sizes of the automatic
+#: harmonics (130, 258, 514) keep the dense path, where Hill's method, which needs the dense
+#: Jacobian, keeps its frozen matrices, and the condensed path keeps the multi-DOF models below
+#: it; above it the dense LU grows like size^3, its matrices like size^2.
 STRUCTURED_MIN_SIZE = 1000
 
 #: From this many unknowns on (and below :data:`STRUCTURED_MIN_SIZE`), ``operator="auto"`` takes
