@@ -201,10 +201,13 @@ def table(out: dict) -> str:
                      f"{products} {c['memory_mb']:11.1f} {c['residual']:9.1e} {c['dte_rms_um']:15.10f}")
     structured = [c for c in out["cases"] if c["operator"] == "structured"]
     dense = [c for c in out["cases"] if c["operator"] == "dense"]
-    lines.append(f"log-log slope of the structured step: {slope(structured):.2f} (H = {structured[0]['H']} .. "
-                 f"{structured[-1]['H']}), {slope(structured, 256):.2f} (H >= 256); dense: "
-                 f"{slope(dense):.2f} (H = {dense[0]['H']} .. {dense[-1]['H']}), "
-                 f"{slope(dense, 256) if len([c for c in dense if c['H'] >= 256]) > 1 else float('nan'):.2f} (H >= 256)")
+    def slopes(cases):  # over all H and over H >= 256, where there are two sizes to fit
+        if len(cases) < 2:
+            return "(fewer than two sizes)"
+        large = slope(cases, 256) if len([c for c in cases if c["H"] >= 256]) > 1 else float("nan")
+        return f"{slope(cases):.2f} (H = {cases[0]['H']} .. {cases[-1]['H']}), {large:.2f} (H >= 256)"
+
+    lines.append(f"log-log slope of the structured step: {slopes(structured)}; dense: {slopes(dense)}")
     lines += ["", "part 3: accuracy",
               f"{'H':>5s} {'|DTE coeff s - d| / max':>24s} {'DTE rms s - d [um]':>19s}"]
     by_h = {c["H"]: c for c in structured}

@@ -37,7 +37,7 @@ The harmonic-balance object decides by size (:attr:`hbgear.engine.hb.HarmonicBal
 
 **Continuation.** The compiled corrector (:mod:`hbgear.engine.continuation.compiled`) takes the
 Jacobian as a :class:`KrylovJacobian` (the same products) and solves each bordered system
-``[[J, dR/dp], [row]]`` by GMRES inside its program (:func:`~hbgear.engine.krylov.gmres_traced`,
+``[[J, dR/dp], [row]]`` by GMRES inside its program (:func:`~hbgear.engine.krylov.gmres`,
 no return to Python per product), right-preconditioned by ``Jb`` bordered with the same column
 and row (:class:`KrylovFactor`), to :data:`BORDERED_RTOL`.
 """
@@ -54,7 +54,7 @@ import numpy as np
 
 from . import banded, fourier
 from .arrays import device_array
-from .krylov import KrylovInfo, gmres, gmres_traced
+from .krylov import KrylovInfo, gmres
 from .persistent import persistent
 from .typed_jit import typed_jit
 
@@ -240,9 +240,10 @@ def _product_jit(hb, free_slot, lin, v):
     return _product(hb, free_slot, lin, v)
 
 
-@partial(jax.jit, static_argnums=(0, 1))
-def _preconditioned_product_jit(hb, free_slot, lin, v):
-    return _product(hb, free_slot, lin, _precondition(hb, lin.band, v))
+@partial(jax.jit, static_argnums=(0, 1, 2, 3))
+def _solve_jit(hb, free_slot, restart, max_products, lin, b, rtol):
+    return gmres(lambda v: _product(hb, free_slot, lin, v), b, precondition=lambda v: _precondition(hb, lin.band, v),
+                 rtol=rtol, restart=restart, max_products=max_products)
 
 
 @partial(jax.jit, static_argnums=0)
@@ -268,12 +269,11 @@ class StructuredJacobian:
 
     def solve(self, b, rtol: float) -> tuple[np.ndarray, KrylovInfo]:
         """GMRES(:data:`RESTART`) with the band preconditioner on the right, at most
-        :data:`MAX_PRODUCTS` products; the best iterate and how far it got."""
-        def operator(v):  # J Jb^{-1} v, one compiled call
-            return np.asarray(_preconditioned_product_jit(self.hb, self.free_slot, self.linearization, device_array(v)))
-
-        return gmres(operator, b, precondition=self.precondition, rtol=rtol, restart=RESTART,
-                     max_iterations=MAX_PRODUCTS)
+        :data:`MAX_PRODUCTS` products, in one compiled call; the best iterate and how far it got."""
+        x, info = _solve_jit(self.hb, self.free_slot, RESTART, MAX_PRODUCTS, self.linearization, device_array(b),
+                             float(rtol))
+        x, info = jax.device_get((x, info))
+        return np.asarray(x), KrylovInfo(bool(info.converged), int(info.iterations), float(info.relative_residual))
 
 
 def linearize(hb, z, p, system, prepared):
@@ -342,7 +342,7 @@ class KrylovJacobian:
 
 class KrylovFactor(NamedTuple):
     r"""The bordered matrix ``B = [[J, column], [row]]`` of a continuation step, for solves by
-    GMRES (:func:`~hbgear.engine.krylov.gmres_traced`) with the bordered band preconditioner
+    GMRES (:func:`~hbgear.engine.krylov.gmres`) with the bordered band preconditioner
     ``Jb`` (:mod:`hbgear.engine.banded`) on the right,
 
     .. math:: P = \begin{pmatrix} J_b & c \\ r_z^T & r_p \end{pmatrix},\quad
@@ -369,8 +369,8 @@ class KrylovFactor(NamedTuple):
 
     def solve(self, b):
         """``B^{-1} b`` to :data:`BORDERED_RTOL` (NaN where GMRES stops above :data:`BORDERED_USABLE_RTOL`)."""
-        x, info = gmres_traced(self.apply, b, precondition=self.precondition, rtol=BORDERED_RTOL, restart=RESTART,
-                               max_products=BORDERED_MAX_PRODUCTS)
+        x, info = gmres(self.apply, b, precondition=self.precondition, rtol=BORDERED_RTOL, restart=RESTART,
+                        max_products=BORDERED_MAX_PRODUCTS)
         return jnp.where(info.relative_residual <= BORDERED_USABLE_RTOL, x, jnp.nan)
 
 
