@@ -471,10 +471,12 @@ def frequency_response(model: GearPairModel, omega_start: float, omega_stop: flo
         speed[0] = speed_rpm_range[0]  # exact ends (no rpm -> rad/s -> rpm rounding)
         if b.success:
             speed[-1] = speed_rpm_range[1]
+    t_table = time.perf_counter()
     parts = [_table(model, b.p, b.z, response.hb, response.max_abs_floquet, response.stable, nu, b.residual, speed)]
     for d, stab in zip(response.doubled, response.doubled_stability):
         parts.append(_table(model, d.p, d.z, d.hb, stab.max_abs, stab.stable, 2, d.residual))
     table = {k: np.concatenate([t[k] for t in parts]) for k in parts[0]}
+    t_table = time.perf_counter() - t_table
     if not stability:
         zones_rule = "not scanned (stability off)"
     elif model.is_linear and len(b) > 1:
@@ -484,7 +486,7 @@ def frequency_response(model: GearPairModel, omega_start: float, omega_stop: flo
         zones_rule = "not scanned: the model is not linear (zones are the unstable curve points)"
     rng = speed_rpm_range if speed_rpm_range is not None else (rad_s_to_rpm(omega_start), rad_s_to_rpm(omega_stop))
     return GearFrequencyResponse(model, response, tuple(rng), table, rule, pd_rule, zones_rule,
-                                 {"start_solution": t_start} | dict(response.timings_s))
+                                 {"start_solution": t_start} | dict(response.timings_s) | {"read_outs": t_table})
 
 
 def _hb(model, harmonics, nu, samples):
