@@ -240,10 +240,15 @@ def _product_jit(hb, free_slot, lin, v):
     return _product(hb, free_slot, lin, v)
 
 
-@partial(jax.jit, static_argnums=(0, 1, 2, 3))
-def _solve_jit(hb, free_slot, restart, max_products, lin, b, rtol):
+def _solve(hb, free_slot, restart, max_products, lin, b, rtol):
     return gmres(lambda v: _product(hb, free_slot, lin, v), b, precondition=lambda v: _precondition(hb, lin.band, v),
                  rtol=rtol, restart=restart, max_products=max_products)
+
+
+#: A Newton step's GMRES solve, one compiled program per (discretisation, settings), its traced
+#: form kept on disk like the linearisation's (tracing and lowering it took ~0.26 s a process).
+_solve_jit = persistent(typed_jit(_solve, static_argnums=(0, 1, 2, 3)), "structured-solve",
+                        "engine.structured._solve_jit", static_argnums=(0, 1, 2, 3))
 
 
 @partial(jax.jit, static_argnums=0)
