@@ -443,3 +443,17 @@ def test_structured_continuation_locates_the_dense_paths_folds():
     assert len(folds[0]) == 3 and len(ours.p) == len(theirs.p)
     np.testing.assert_allclose(folds[1], folds[0], rtol=1e-9)
     np.testing.assert_allclose(ours.p, theirs.p, rtol=1e-9)
+
+
+def test_linearization_holds_no_weakly_typed_scalars():
+    """A linearisation traced in this process and one loaded from disk (exported programs return
+    typed arrays) must give the Newton solve's kept program the same argument types, or every
+    second process exports that program again (found: the base frequency and the scale were
+    Python floats, weakly typed, when traced)."""
+    model = gear("NLTV")
+    system, omega = GearSystem(model), rpm_to_rad_s(9000.0)
+    _, hb = pair(model.ndof, 8, 40)
+    _, jac = hb.residual_and_linearization(jnp.zeros(hb.size), omega, system)
+    weak = [jax.tree_util.keystr(path) for path, leaf in jax.tree_util.tree_flatten_with_path(jac.linearization)[0]
+            if getattr(leaf, "weak_type", False)]
+    assert weak == []

@@ -211,8 +211,13 @@ def linearization(hb, z, p, system, prepared) -> Linearization:
     derivatives = at_c = weight = delta = None
     if not system.is_linear:
         derivatives, (_, at_c, weight, delta) = hb._nonlinear_derivatives(x, extra, p, system, prepared.jumps)
-    lin = Linearization(hb.base_frequency(system, p), system.mass_matrix(p, jnp), stiffness, damping, derivatives,
-                        at_c, weight, delta, system.displacement_scale / system.force_scale, None)
+    # the scalars as float64 arrays, not weakly typed: a linearisation loaded from disk
+    # (hbgear.engine.persistent) returns them typed, and a traced one must give the solve's
+    # program the same argument types (else the next process exports the solve again)
+    w, scale = (jnp.asarray(v, dtype=jnp.float64) for v in (hb.base_frequency(system, p),
+                                                           system.displacement_scale / system.force_scale))
+    lin = Linearization(w, system.mass_matrix(p, jnp), stiffness, damping, derivatives, at_c, weight, delta, scale,
+                        None)
     return lin._replace(band=_band_factor(hb, lin, system.free_mean_dof))
 
 
