@@ -26,6 +26,12 @@ __all__ = ["mesh_period_rule", "fourier_coefficients", "LatticeRule", "lattice_r
 _GL_ORDER = 8
 _GRADE_LEVELS = 14
 
+#: Complex entries per work array of :func:`lattice_synthesis` (16 MB). The read-outs of 128
+#: points at H = 512 (18032 nodes, 24 progressions): 0.43-0.44 s in blocks of 2**20 entries,
+#: 0.86 s (1.8 s on a process's first call: fresh memory) in blocks of 2**22, 0.47 s in 2**18,
+#: 0.62 s in 2**16; the same values to the bit.
+SYNTHESIS_BLOCK = 2**20
+
 
 @lru_cache(maxsize=None)
 def _gauss_legendre() -> tuple[np.ndarray, np.ndarray]:
@@ -218,7 +224,8 @@ def lattice_coefficients(values, rule: LatticeRule, xp=np):
     return xp.sum(f, axis=-2) + direct
 
 
-def lattice_synthesis(coefficients, rule: LatticeRule, shift: float = 0.0, scale: float = 1.0, block: int = 2**22):
+def lattice_synthesis(coefficients, rule: LatticeRule, shift: float = 0.0, scale: float = 1.0,
+                      block: int = SYNTHESIS_BLOCK):
     """``Re sum_k c_k exp(2 pi i k t_i)`` at ``t_i = shift + scale s_i`` for every node of the rule
     (numpy; the transpose of :func:`lattice_coefficients`, with the direct nodes' basis built here).
 
