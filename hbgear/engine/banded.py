@@ -34,7 +34,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["BAND", "BandFactor", "band_blocks", "band_matrix", "factor_band", "solve_band"]
+__all__ = ["BAND", "BandFactor", "coefficients", "band_blocks", "band_matrix", "factor_band", "solve_band",
+           "to_groups", "from_groups"]
 
 #: Harmonics either side of the diagonal kept by the preconditioner (and harmonics per group).
 BAND = 4
@@ -49,9 +50,11 @@ class BandFactor(NamedTuple):
     upper: Any
 
 
-def _coefficients(samples):
-    """``g_0 .. g_{2H}`` (complex) of uniform samples ``(..., N)`` (``N > 4H``)."""
-    return jnp.fft.rfft(samples, axis=-1) / samples.shape[-1]
+def coefficients(samples, harmonics: int):
+    """The complex coefficients ``g_0 .. g_{2H}`` of :func:`band_blocks` from uniform samples
+    ``(..., N)`` (zeros past the grid's Nyquist order when ``N <= 4H``)."""
+    c = jnp.fft.rfft(samples, axis=-1)[..., : 2 * harmonics + 1] / samples.shape[-1]
+    return jnp.concatenate([c, jnp.zeros(c.shape[:-1] + (2 * harmonics + 1 - c.shape[-1],), c.dtype)], axis=-1)
 
 
 @lru_cache(maxsize=32)

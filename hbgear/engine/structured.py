@@ -172,19 +172,13 @@ def _apply_nonlinear(hb, x, lin: Linearization):
     return fourier.project(u, H, jnp) + jumps @ lin.delta
 
 
-def _coefficients(samples, harmonics: int):
-    """Complex coefficients ``g_0 .. g_2H`` of uniform samples (zeros past the grid's Nyquist order)."""
-    c = jnp.fft.rfft(samples, axis=-1)[..., : 2 * harmonics + 1] / samples.shape[-1]
-    return jnp.concatenate([c, jnp.zeros(c.shape[:-1] + (2 * harmonics + 1 - c.shape[-1],), c.dtype)], axis=-1)
-
-
 def _band_factor(hb, lin: Linearization, free_slot) -> banded.BandFactor:
     """The band preconditioner (:mod:`hbgear.engine.banded`) of the linearisation: the
     coefficients of ``K - G_q`` and ``C - G_v`` from their samples (the jump terms left out)."""
     H, N = hb.harmonics, hb.samples
-    stiffness, damping = _coefficients(lin.stiffness, H), _coefficients(lin.damping, H)
+    stiffness, damping = banded.coefficients(lin.stiffness, H), banded.coefficients(lin.damping, H)
     if lin.derivatives is not None:
-        g = _coefficients(lin.derivatives[..., :N], H)
+        g = banded.coefficients(lin.derivatives[..., :N], H)
         damping = damping - g[-1]
         stiffness = stiffness - g[0] if g.shape[0] == 2 else stiffness
     blocks = banded.band_blocks(stiffness, damping, lin.w, lin.mass, lin.scale, H, free_slot)
@@ -256,16 +250,11 @@ _solve_jit = persistent(typed_jit(_solve, static_argnums=(0, 1, 2, 3)), "structu
                         "engine.structured._solve_jit", static_argnums=(0, 1, 2, 3))
 
 
-@partial(jax.jit, static_argnums=0)
-def _precondition_jit(hb, band, v):
-    return _precondition(hb, band, v)
-
-
 class StructuredJacobian:
     """``dR/dz`` at one point as products and preconditioned GMRES solves (:func:`linearize`).
 
-    **Methods:** :meth:`matvec` ``v -> J v``; :meth:`precondition` ``v -> Jb^{-1} v``;
-    :meth:`solve` ``(b, rtol) -> (x, KrylovInfo)`` with ``||b - J x|| <= rtol ||b||``.
+    **Methods:** :meth:`matvec` ``v -> J v``; :meth:`solve` ``(b, rtol) -> (x, KrylovInfo)``
+    with ``||b - J x|| <= rtol ||b||`` (GMRES preconditioned by the band ``Jb``).
     """
 
     def __init__(self, hb, free_slot, lin: Linearization):
@@ -273,9 +262,6 @@ class StructuredJacobian:
 
     def matvec(self, v) -> np.ndarray:
         return np.asarray(_product_jit(self.hb, self.free_slot, self.linearization, device_array(v)))
-
-    def precondition(self, v) -> np.ndarray:
-        return np.asarray(_precondition_jit(self.hb, self.linearization.band, device_array(v)))
 
     def solve(self, b, rtol: float) -> tuple[np.ndarray, KrylovInfo]:
         """GMRES(:data:`RESTART`) with the band preconditioner on the right, at most
@@ -289,7 +275,7 @@ class StructuredJacobian:
 def linearize(hb, z, p, system, prepared):
     """``(R, J)`` at ``(z, p)`` on the structured path: the residual (device array; the compiled
     residual the line search uses too) and the :class:`StructuredJacobian` (derivative samples,
-    inverted blocks: one compiled evaluation)."""
+    the band preconditioner's factorisation: one compiled evaluation)."""
     r = hb._residual_jit(z, p, system, prepared)
     return r, StructuredJacobian(hb, system.free_mean_dof, _linearize_jit(hb, z, p, system, prepared))
 
