@@ -210,7 +210,7 @@ def test_python_dash_m_entry_point(tmp_path):
 def test_console_script_flushes_what_was_printed_and_keeps_the_status():
     """console_main ends the process with os._exit: buffered output (a pipe) must still arrive whole."""
     code = ("import sys, hbgear.cli as cli\n"
-            "def fake():\n"
+            "def fake(**how):\n"
             "    print('x' * 200000, end='')\n"
             "    print('END', file=sys.stderr, end='')\n"
             "    sys.stdout.write('END')\n"
@@ -229,13 +229,38 @@ def test_console_script_ends_normally_under_a_profiler_or_when_asked(how):
     HBGEAR_FAST_EXIT=0) the atexit handlers run; otherwise the process ends at once."""
     code = ("import atexit, sys, hbgear.cli as cli\n"
             "atexit.register(lambda: print('atexit ran'))\n"
-            "cli.main = lambda: 0\n"
+            "cli.main = lambda **how: 0\n"
             + ("sys.setprofile(lambda *a: None)\n" if how == "profiled" else "")
             + "cli.console_main()\n")
     env = dict(os.environ, HBGEAR_FAST_EXIT="0" if how == "asked" else "1")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
     assert result.returncode == 0
     assert ("atexit ran" in result.stdout) == (how != "plain")
+
+
+def test_the_command_imports_without_the_garbage_collector_and_computes_with_it(tmp_path):
+    """console_main pauses Python's cyclic collector for the imports; the command runs with it
+    on again and the imports frozen. main() called from Python leaves the collector alone."""
+    code = ("import gc, sys, hbgear.cli as cli\n"
+            "def probe(config, args, out_dir):\n"
+            "    print('run:', gc.isenabled(), gc.get_freeze_count() > 0)\n"
+            "    return 0\n"
+            "cli.register(cli.Command(name='probe', help='', add_arguments=None, run=probe, dynamic_model=False))\n"
+            "print('before:', gc.isenabled())\n"
+            f"argv = ['probe', 'examples/paper_table1.toml', '--out', {str(tmp_path / 'out')!r}]\n"
+            "if sys.argv[1:] == ['library']:\n"
+            "    print('status:', cli.main(argv), gc.isenabled(), gc.get_freeze_count())\n"
+            "else:\n"
+            "    sys.argv = ['hbgear', *argv]\n"
+            "    cli.console_main()\n")
+    env = dict(os.environ, HBGEAR_NO_CACHE="1")
+    own = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert own.returncode == 0, own.stderr
+    assert own.stdout.split("\n")[:2] == ["before: True", "run: True True"]
+    library = subprocess.run([sys.executable, "-c", code, "library"], capture_output=True, text=True, timeout=120,
+                             env=env)
+    assert library.returncode == 0, library.stderr
+    assert library.stdout.split("\n")[:3] == ["before: True", "run: True False", "status: 0 True 0"]
 
 
 # ----------------------------------------------------------------------------- hbgear validate as a gate

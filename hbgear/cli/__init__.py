@@ -219,8 +219,12 @@ def _fail(prefix: str, message: object, status: int) -> int:
     return status
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI. **Returns:** the exit status (see the module docstring)."""
+def main(argv: Sequence[str] | None = None, *, own_process: bool = False) -> int:
+    """Run the CLI. **Returns:** the exit status (see the module docstring).
+
+    `own_process`: the process is the command's (:func:`console_main`), which imported with the
+    garbage collector paused (:func:`hbgear.runtime.pause_garbage_collection`); it is resumed,
+    the imports frozen, once the runtime is configured."""
     argv = list(sys.argv[1:] if argv is None else argv)
     out_dir: Path | None = None
     created = False
@@ -251,6 +255,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings(record=True) as said:  # e.g. a jax too old for the disk cache
             warnings.simplefilter("always")
             runtime.configure()  # one XLA thread, the disk compilation cache: before any computation
+        if own_process:
+            runtime.resume_garbage_collection()
         for warning in said:
             print(f"hbgear: warning: {warning.message}", file=sys.stderr)
         status = command.run(config, args, out_dir)
@@ -278,10 +284,14 @@ def console_main() -> NoReturn:
     (``os._exit`` after flushing the standard streams and the logging handlers). :func:`main`
     itself returns, for callers in Python. The process ends normally (its ``atexit`` handlers
     run) under a profiler or tracer (``python -m cProfile -m hbgear``, pyinstrument, coverage),
-    which write their reports at exit, and with ``HBGEAR_FAST_EXIT=0``."""
+    which write their reports at exit, and with ``HBGEAR_FAST_EXIT=0``. The imports run with the
+    garbage collector paused (:func:`hbgear.runtime.pause_garbage_collection`)."""
     import os
 
-    status = main()
+    from ..runtime import pause_garbage_collection
+
+    pause_garbage_collection()
+    status = main(own_process=True)
     if (sys.getprofile() is not None or sys.gettrace() is not None
             or os.environ.get("HBGEAR_FAST_EXIT", "1").strip() == "0"):
         sys.exit(status)

@@ -80,13 +80,17 @@ def _serve(modules: Sequence[str]) -> None:
     it ends at the end of its input, at once (``os._exit``: nothing is left to tear down)."""
     import importlib
 
+    from ..runtime import pause_garbage_collection, resume_garbage_collection
+
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # a stray print must not corrupt the channel
+    pause_garbage_collection()  # the imports, as in the command's own process
     for name in modules:
         try:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 -- the figure that needs it reports it
             pass
+    resume_garbage_collection()
     try:
         _loop(stdin, stdout)
     except (EOFError, OSError):  # the command ended (or closed the pipes) first: nothing to say
