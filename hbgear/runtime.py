@@ -20,7 +20,11 @@ before the first JAX computation of the process, for the thread setting to take 
   unknowns took 196 ms (median of 20; minimum 14 ms) with the default threads, 3.7 ms with one;
   a continuation point of the NLTV pair on bearings and shafts (8 DOF) cost 62x the 2-DOF point
   with the default threads, 7x with one (``benchmarks/bench_bearings.py``). Hill's method limits
-  BLAS to one thread around its eigenproblems anyway.
+  BLAS to one thread around its eigenproblems anyway. The ``hbgear`` command goes further
+  (:func:`blas_without_threads`): ``OPENBLAS_NUM_THREADS=1`` before NumPy loads, so OpenBLAS
+  makes no worker thread at all (each library's thread otherwise spins ~0.1 s of CPU when
+  it loads: four such spins, NumPy's and SciPy's in the command and in its figure helper,
+  took ~0.3 s of the two cores while the LTV example started).
 - **Disk compilation cache** (``~/.cache/hbgear/jax``, or ``$HBGEAR_CACHE_DIR``): a second run
   of the same problem structure starts without compiling; and, in its folder ``hbgear-programs``,
   the traced programs of hbgear's own functions (:mod:`hbgear.engine.persistent`), so that it
@@ -51,7 +55,8 @@ import re
 import warnings
 from pathlib import Path
 
-__all__ = ["configure", "enable_compilation_cache", "pause_garbage_collection", "resume_garbage_collection", "single_threaded_runtime", "single_thread_blas_runtime",
+__all__ = ["configure", "enable_compilation_cache", "pause_garbage_collection", "resume_garbage_collection",
+           "blas_without_threads", "single_threaded_runtime", "single_thread_blas_runtime",
            "keep_freed_memory", "default_cache_dir"]
 
 
@@ -148,6 +153,17 @@ def single_threaded_runtime() -> bool:
 
 
 _BLAS_LIMIT: list = []
+
+
+def blas_without_threads() -> bool:
+    """Set ``OPENBLAS_NUM_THREADS=1`` for this process and its children, before NumPy or SciPy
+    load OpenBLAS (later it changes nothing). For a process that is the command's own: a library
+    user's environment is left alone. **Returns:** whether it was set: not with
+    ``HBGEAR_BLAS_THREADS=default`` nor when ``OPENBLAS_NUM_THREADS`` is set already."""
+    if os.environ.get("HBGEAR_BLAS_THREADS", "").strip().lower() == "default" or "OPENBLAS_NUM_THREADS" in os.environ:
+        return False
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    return True
 
 
 def single_thread_blas_runtime() -> bool:

@@ -158,3 +158,27 @@ def test_the_cli_says_in_one_line_that_the_cache_stays_off_with_an_old_jax(tmp_p
     assert said == ["hbgear: warning: jax 0.5.3: the disk compilation cache stays off (programs loaded from it "
                     "can return wrong results before jax 0.6.2; upgrade jax)"], out
     assert "3000 rpm: DTE rms" in out and not (tmp_path / "cache").exists()
+
+
+@pytest.mark.parametrize("env, expected", [({}, "True 1 [1]"), ({"HBGEAR_BLAS_THREADS": "default"}, "False None"),
+                                           ({"OPENBLAS_NUM_THREADS": "2"}, "False 2")])
+def test_the_command_loads_openblas_without_threads_unless_declined(env, expected):
+    """``blas_without_threads()`` (the command's first step) sets ``OPENBLAS_NUM_THREADS=1`` before
+    NumPy loads, so its OpenBLAS starts with one thread; declined with ``HBGEAR_BLAS_THREADS=default``,
+    and a value the user set is kept."""
+    base = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "HBGEAR_BLAS_THREADS")}
+    code = """
+        import os
+        from hbgear.runtime import blas_without_threads
+        done = blas_without_threads()
+        value = os.environ.get("OPENBLAS_NUM_THREADS")
+        if done:
+            import numpy
+            from threadpoolctl import threadpool_info
+            print(done, value, sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}))
+        else:
+            print(done, value)
+    """
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(base, **env),
+                         capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == expected

@@ -285,12 +285,14 @@ def console_main() -> NoReturn:
     itself returns, for callers in Python. The process ends normally (its ``atexit`` handlers
     run) under a profiler or tracer (``python -m cProfile -m hbgear``, pyinstrument, coverage),
     which write their reports at exit, and with ``HBGEAR_FAST_EXIT=0``. The imports run with the
-    garbage collector paused (:func:`hbgear.runtime.pause_garbage_collection`)."""
+    garbage collector paused (:func:`hbgear.runtime.pause_garbage_collection`) and OpenBLAS
+    makes no threads (:func:`hbgear.runtime.blas_without_threads`)."""
     import os
 
-    from ..runtime import pause_garbage_collection
+    from ..runtime import blas_without_threads, pause_garbage_collection
 
     pause_garbage_collection()
+    blas_without_threads()
     status = main(own_process=True)
     if (sys.getprofile() is not None or sys.gettrace() is not None
             or os.environ.get("HBGEAR_FAST_EXIT", "1").strip() == "0"):
