@@ -22,8 +22,10 @@
   simplification) are the same; only LLVM's optimisation of the generated code is left out. Whole
   suite, two workers, with the Newton's Jacobian at full steps and the 8-DOF TI test's shaft
   damping (the same day): 562-817 s in three runs, against 1007-1276 s without the three
-  (2026-12-03). ``tests/test_optimization_level.py`` runs one command at the product's settings
-  against the suite's. ``HBGEAR_TEST_XLA_OPTIMIZED=1`` runs the suite at the product's settings.
+  (2026-12-03). With them, XLA's LLVM IR emitters, as the ``hbgear`` command uses them
+  (:func:`hbgear.runtime.fast_compilation`; the runtime's own flag is not added in-process).
+  ``tests/test_optimization_level.py`` runs one command at the product's settings
+  against the suite's. ``HBGEAR_TEST_XLA_OPTIMIZED=1`` runs the suite at XLA's optimisation level.
 - Figures drawn in the test's process (``HBGEAR_FIGURE_PROCESS=0``): the figure helper of
   ``hbgear frc`` (:mod:`hbgear.outputs.drawing`) imports matplotlib and JAX in a process of its
   own, ~1.5 s of a core that the suite's second worker is using; ``tests/test_drawing.py`` tests
@@ -43,7 +45,8 @@ os.environ.setdefault("HBGEAR_NO_CACHE", "1")
 os.environ.setdefault("HBGEAR_FIGURE_PROCESS", "0")
 
 #: The suite's XLA code-generation flags (module docstring).
-TEST_XLA_FLAGS = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+TEST_XLA_FLAGS = ("--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true "
+                  "--xla_cpu_use_fusion_emitters=false")
 if os.environ.get("HBGEAR_TEST_XLA_OPTIMIZED") != "1" and TEST_XLA_FLAGS not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 

@@ -116,7 +116,9 @@ def test_real_pair_merged_by_the_seed_is_split_on_its_line():
         real = sorted(refined[np.abs(refined.imag - 0.5) < 1e-5], key=lambda x: x.real)
         assert len(real) == 2
         for mine, theirs in zip(real, real_dense):
-            assert backward_error(mine) <= 2.0 * backward_error(theirs)
+            # as small as the dense eigenvalue's, or at the round-off (XLA's emitters trade the two
+            # between 2e-17 and 1e-16: both are backward-stable answers)
+            assert backward_error(mine) <= max(2.0 * backward_error(theirs), np.finfo(float).eps)
         other = np.exp(2 * np.pi * refined[np.abs(refined.imag - 0.5) >= 1e-5])
         assert max_pair_distance(other, np.exp(2 * np.pi * dense[np.abs(dense.imag - 0.5) >= 1e-5])) < REFINED_TOL
 

@@ -182,3 +182,27 @@ def test_the_command_loads_openblas_without_threads_unless_declined(env, expecte
     out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(base, **env),
                          capture_output=True, text=True, check=True)
     assert out.stdout.strip() == expected
+
+
+@pytest.mark.parametrize("env, expected", [
+    ({}, "True --xla_cpu_use_fusion_emitters=false"),
+    ({"HBGEAR_XLA_EMITTERS": "default"}, "False "),
+    ({"XLA_FLAGS": "--xla_cpu_use_fusion_emitters=true"}, "False --xla_cpu_use_fusion_emitters=true"),
+    ({"JAX_USED_FIRST": "1"}, "False "),
+])
+def test_configure_asks_for_the_llvm_emitters_unless_declined_or_too_late(env, expected):
+    """``configure()`` adds the emitters' flag to ``XLA_FLAGS`` before JAX's CPU client exists;
+    it leaves a user's choice, ``HBGEAR_XLA_EMITTERS=default`` and a process that used JAX first alone."""
+    base = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "HBGEAR_XLA_EMITTERS")}
+    code = """
+        import os
+        if os.environ.get("JAX_USED_FIRST"):
+            import jax.numpy as jnp
+            jnp.ones(2).block_until_ready()
+        import hbgear
+        done = hbgear.runtime.configure(cache=False, memory=False)
+        print(done["fast_compilation"], os.environ.get("XLA_FLAGS", ""))
+    """
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=dict(base, **env),
+                         capture_output=True, text=True, check=True)
+    assert out.stdout.strip("\n") == expected
