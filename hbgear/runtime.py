@@ -6,7 +6,7 @@ computes anything, and a library user may call it too (before JAX creates its CP
 before the first JAX computation of the process, for the thread setting to take effect)::
 
     import hbgear
-    hbgear.runtime.configure()            # one XLA and one BLAS thread, the disk cache, glibc's thresholds
+    hbgear.runtime.configure()            # one XLA and one BLAS thread, XLA's LLVM emitters, the disk cache, glibc's thresholds
 
 - **One XLA thread.** A continuation step is ~340 small kernels; XLA:CPU hands independent ones
   to an intra-op pool of one thread per CPU, and on small kernels the hand-offs cost more than
