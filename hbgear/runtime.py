@@ -6,7 +6,7 @@ computes anything, and a library user may call it too (before JAX creates its CP
 before the first JAX computation of the process, for the thread setting to take effect)::
 
     import hbgear
-    hbgear.runtime.configure()            # one XLA and one BLAS thread, XLA's LLVM emitters, the disk cache, glibc's thresholds
+    hbgear.runtime.configure()  # one XLA and one BLAS thread, XLA's LLVM emitters, the disk cache, glibc's thresholds
 
 - **One XLA thread.** A continuation step is ~340 small kernels; XLA:CPU hands independent ones
   to an intra-op pool of one thread per CPU, and on small kernels the hand-offs cost more than
@@ -50,9 +50,9 @@ The ``hbgear`` command also imports without Python's cyclic garbage collector
 import (three of 24-90 ms in the LTV example) cost ~0.2 s a command, the passes after the
 freeze ~0.05 s. A library user's process is left alone.
 
-Environment: ``HBGEAR_XLA_EMITTERS=default`` keeps XLA's emitters; ``HBGEAR_RUNTIME_THREADS=default`` keeps JAX's pool; ``HBGEAR_BLAS_THREADS=default`` keeps
-OpenBLAS's threads; ``HBGEAR_NO_CACHE=1`` leaves the
-cache off; ``HBGEAR_MALLOC=default`` keeps glibc's thresholds.
+Environment: ``HBGEAR_XLA_EMITTERS=default`` keeps XLA's emitters; ``HBGEAR_RUNTIME_THREADS=default``
+keeps JAX's pool; ``HBGEAR_BLAS_THREADS=default`` keeps OpenBLAS's threads; ``HBGEAR_NO_CACHE=1``
+leaves the cache off; ``HBGEAR_MALLOC=default`` keeps glibc's thresholds.
 """
 
 from __future__ import annotations
