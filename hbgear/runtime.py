@@ -116,6 +116,11 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | No
 FAST_COMPILATION_XLA_FLAG = "--xla_cpu_use_fusion_emitters=false"
 
 
+def _declined(variable: str) -> bool:
+    """Whether the environment variable `variable` is ``default``: the user keeps the library's own setting."""
+    return os.environ.get(variable, "").strip().lower() == "default"
+
+
 def _backend_exists() -> bool:
     try:
         from jax._src import xla_bridge
@@ -130,7 +135,7 @@ def fast_compilation() -> bool:
     CPU client). **Returns:** whether it was done: ``False`` with ``HBGEAR_XLA_EMITTERS=default``,
     when ``XLA_FLAGS`` names the emitters already (the user's choice), or when JAX's backend
     exists already (JAX used before: too late for this process)."""
-    if os.environ.get("HBGEAR_XLA_EMITTERS", "").strip().lower() == "default":
+    if _declined("HBGEAR_XLA_EMITTERS"):
         return False
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_use_fusion_emitters" in flags or _backend_exists():
@@ -161,14 +166,9 @@ def single_threaded_runtime() -> bool:
         return False
     import jax
 
-    try:
-        from jax._src import xla_bridge
-
-        if xla_bridge.backends_are_initialized():
-            return False
-        original = os.sched_getaffinity(0)
-    except Exception:  # pragma: no cover - a JAX without this hook: keep its default
+    if _backend_exists():  # JAX used before (or a JAX without the hook: keep its default)
         return False
+    original = os.sched_getaffinity(0)
     if len(original) < 2:
         return False
     before = _threads()
@@ -194,7 +194,7 @@ def blas_without_threads() -> bool:
     load OpenBLAS (later it changes nothing). For a process that is the command's own: a library
     user's environment is left alone. **Returns:** whether it was set: not with
     ``HBGEAR_BLAS_THREADS=default`` nor when ``OPENBLAS_NUM_THREADS`` is set already."""
-    if os.environ.get("HBGEAR_BLAS_THREADS", "").strip().lower() == "default" or "OPENBLAS_NUM_THREADS" in os.environ:
+    if _declined("HBGEAR_BLAS_THREADS") or "OPENBLAS_NUM_THREADS" in os.environ:
         return False
     os.environ["OPENBLAS_NUM_THREADS"] = "1"
     return True
@@ -204,7 +204,7 @@ def single_thread_blas_runtime() -> bool:
     """Limit the process's BLAS/LAPACK libraries (NumPy's and SciPy's OpenBLAS, which JAX's CPU
     LAPACK calls use too) to one thread for the rest of the process (see the module docstring).
     **Returns:** whether it was done: ``False`` with ``HBGEAR_BLAS_THREADS=default``."""
-    if os.environ.get("HBGEAR_BLAS_THREADS", "").strip().lower() == "default":
+    if _declined("HBGEAR_BLAS_THREADS"):
         return False
     if not _BLAS_LIMIT:
         import scipy.linalg  # noqa: F401 -- loads SciPy's BLAS so that the limit reaches it
@@ -222,7 +222,7 @@ MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES = 64 << 20, 512 << 20
 def keep_freed_memory() -> bool:
     """Raise glibc's ``mmap`` and trim thresholds (see the module docstring). **Returns:** whether
     it was done: ``False`` with ``HBGEAR_MALLOC=default`` or without glibc's ``mallopt``."""
-    if os.environ.get("HBGEAR_MALLOC", "").strip().lower() == "default":
+    if _declined("HBGEAR_MALLOC"):
         return False
     try:
         import ctypes
