@@ -179,10 +179,11 @@ def _zero_tol(system, drop_trivial: bool):
 
 def _exponents_and_multipliers(mu, w):
     """``(lam, mult)`` of exponents ``mu = lam / w``: by decreasing ``|mult|``, the two of a
-    complex pair (equal moduli) with ``Im mult > 0`` first, so every route gives one order."""
+    complex pair (equal moduli) with ``Im mult > 0`` first, so every route gives one order.
+    `mu` may be a stack ``(m, k)`` with `w` ``(m,)``."""
     mult = np.exp(2.0 * np.pi * mu)
-    order = np.lexsort((-mult.imag, -np.abs(mult)))
-    return mu[order] * w, mult[order]
+    order = np.lexsort((-mult.imag, -np.abs(mult)), axis=-1)
+    return np.take_along_axis(mu, order, axis=-1) * np.asarray(w)[..., None], np.take_along_axis(mult, order, axis=-1)
 
 
 def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
@@ -202,6 +203,9 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
     a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
     mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
                             copy_tol=copy_tol, method=method)
+    if len({len(mu) for mu in mus}) == 1:  # one vectorised sort for the whole stack
+        lam, mult = _exponents_and_multipliers(np.stack(mus), w)
+        return list(zip(lam, mult))
     return [_exponents_and_multipliers(mu, wk) for mu, wk in zip(mus, w)]
 
 

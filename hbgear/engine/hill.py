@@ -108,16 +108,18 @@ def single_thread_blas():
 
 _PENCIL_FUNCTIONS: dict = {}
 
-#: Points per vmapped Hill-matrix call: the largest power of two (at most 32) whose stacked
-#: matrices fit in about this many bytes (8 points at N = 130, 32 at N = 15). At N = 130 one
-#: call of 8 points took 0.22 ms a point, one of 32 0.31 ms, one call per point 0.49 ms.
+#: Points per vmapped Hill-matrix call: the largest power of two (at most 256) whose stacked
+#: matrices fit in about this many bytes (8 points at N = 130, 64 at N = 42, 256 at N = 15). At
+#: N = 130 one call of 8 points took 0.22 ms a point, one of 32 0.31 ms, one call per point
+#: 0.49 ms; the 167 points of the Duffing curve (N = 15) 2.1 ms in chunks of 32, 0.97 ms in one
+#: of 256.
 PENCIL_CHUNK_BYTES = 4e6
 
 
 def _pencil_chunk(size: int) -> int:
     """Points per vmapped call for pencils of `size` unknowns (see :data:`PENCIL_CHUNK_BYTES`)."""
     fit = max(1, int(PENCIL_CHUNK_BYTES // (24.0 * size * size)))
-    return min(32, 1 << (fit.bit_length() - 1))
+    return min(256, 1 << (fit.bit_length() - 1))
 
 
 def _pencil_function(hb, batched: bool):
@@ -319,26 +321,28 @@ def _window(ndof: int, harmonics: int, seed: int) -> np.ndarray:
     return (np.arange(ndof)[:, None] * block + np.arange(2 * seed + 1)[None]).ravel()
 
 
-def _shift_harmonics(v: np.ndarray, ndof: int, harmonics: int, k: int) -> np.ndarray:
+def _shift_harmonics(v: np.ndarray, ndof: int, harmonics: int, k) -> np.ndarray:
     """The eigenvector of the copy ``mu + i k`` from that of ``mu``: complex harmonic ``j`` of
-    the periodic factor moves to ``j - k`` (``e^{(mu + ik) tau} p'(tau) = e^{mu tau} p(tau)``)."""
+    the periodic factor moves to ``j - k`` (``e^{(mu + ik) tau} p'(tau) = e^{mu tau} p(tau)``).
+
+    `v`: one vector ``(N,)`` and an integer `k`, or a stack ``(m, N)`` and ``(m,)`` shifts."""
     block = 2 * harmonics + 1
-    x = v.reshape(ndof, block)
-    c = np.zeros((ndof, 2 * harmonics + 1), dtype=complex)  # complex coefficients, index j + H
-    c[:, harmonics] = x[:, 0]
-    c[:, harmonics + 1 :] = (x[:, 1::2] - 1j * x[:, 2::2]) / 2.0
-    c[:, harmonics - 1 :: -1] = (x[:, 1::2] + 1j * x[:, 2::2]) / 2.0
-    c = np.roll(c, -k, axis=1)
-    if k > 0:
-        c[:, -k:] = 0.0
-    elif k < 0:
-        c[:, :-k] = 0.0
-    out = np.empty_like(x, dtype=complex)
-    out[:, 0] = c[:, harmonics]
-    pos, neg = c[:, harmonics + 1 :], c[:, harmonics - 1 :: -1]
-    out[:, 1::2] = pos + neg
-    out[:, 2::2] = 1j * (pos - neg)
-    return out.ravel()
+    single = v.ndim == 1
+    x = v.reshape(-1, ndof, block)
+    shift = np.broadcast_to(np.asarray(k, dtype=int), x.shape[:1])
+    c = np.empty(x.shape, dtype=complex)  # complex coefficients, index j + H
+    c[..., harmonics] = x[..., 0]
+    c[..., harmonics + 1 :] = (x[..., 1::2] - 1j * x[..., 2::2]) / 2.0
+    c[..., harmonics - 1 :: -1] = (x[..., 1::2] + 1j * x[..., 2::2]) / 2.0
+    source = np.arange(block)[None, :] + shift[:, None]  # new index i holds old index i + k
+    inside = (source >= 0) & (source < block)
+    c = np.take_along_axis(c, np.clip(source, 0, block - 1)[:, None, :], axis=-1) * inside[:, None, :]
+    out = np.empty(x.shape, dtype=complex)
+    out[..., 0] = c[..., harmonics]
+    pos, neg = c[..., harmonics + 1 :], c[..., harmonics - 1 :: -1]
+    out[..., 1::2] = pos + neg
+    out[..., 2::2] = 1j * (pos - neg)
+    return out.reshape(v.shape) if single else out.reshape(len(x), -1)
 
 
 def _rayleigh_root(a0, a1, a2, v, near):
@@ -462,6 +466,15 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
 # ============================================================================ refined, batched
 
 
+#: A refinement step counts as converged only if, besides a step below :data:`STEP_TOL`, the
+#: eigenpair's backward error ``|P(mu) v| / ((|A0| + |mu| |A1| + |mu|^2 |A2|) |v|)`` (Frobenius
+#: norms, ``|v| = 1``) is below this: the step test assumes quadratic convergence, and a slow
+#: approach from a far seed passed it with the multipliers up to 3e-9 off the dense way's
+#: (backward errors 1e-13 to 7e-13, where converged pairs are below 1.4e-14; Duffing curve, its
+#: points in random order).
+BACKWARD_TOL = 1e-13
+
+
 def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, update="rayleigh"):
     """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
     stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``.
@@ -476,38 +489,53 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, upda
     mu, v = mu.copy(), v.copy()
     converged = np.zeros(len(mu), dtype=bool)
     active = np.arange(len(mu))
+    size = a0.shape[-1]
+    # the real matrices of each seed's point, once: (seeds, 3, N, N); every product below is a real
+    # matmul on the complex vectors' (re, im) columns (a real @ complex matmul copies the matrix to complex)
+    stacked = np.stack([a0, a1, a2], axis=1)[owner]
+    norms = np.sqrt(np.einsum("skij,skij->sk", stacked, stacked))  # |A0|, |A1|, |A2| (Frobenius)
     for _ in range(max_steps):
         if active.size == 0:
             break
-        o, m, x = owner[active], mu[active], v[active, :, None]
-        c0, c1, c2 = a0[o], a1[o], a2[o]
-        pencil = c1 * m[:, None, None]
-        pencil += c0
-        pencil += c2 * (m * m)[:, None, None]
-        try:
-            y = np.linalg.solve(pencil, c1 @ x + (2.0 * m)[:, None, None] * (c2 @ x))
+        c = stacked if active.size == len(stacked) else stacked[active]
+        m, x = mu[active], v[active]
+        coef = np.stack([np.ones_like(m), m, m * m], axis=1)[:, None, :]  # P(m) = A0 + m A1 + m^2 A2
+        flat = c.reshape(len(c), 3, size * size)
+        pencil = np.empty((len(c), size * size), dtype=complex)
+        pencil.real = (coef.real @ flat)[:, 0]
+        pencil.imag = (coef.imag @ flat)[:, 0]
+        ax = (c[:, 1:] @ _as_columns(x)[:, None]).view(complex)[..., 0]  # A1 x, A2 x
+        try:  # P(m) y = P'(m) x = (A1 + 2 m A2) x
+            y = np.linalg.solve(pencil.reshape(-1, size, size), (ax[:, 0] + (2.0 * m)[:, None] * ax[:, 1])[..., None])
         except np.linalg.LinAlgError:  # an exactly singular pencil: leave these to the single-point way
             break
-        norm = np.linalg.norm(y[..., 0], axis=1)
+        y = y[..., 0]
+        norm = np.linalg.norm(y, axis=1)
         if update == "newton":
             with np.errstate(divide="ignore", invalid="ignore"):
-                new = m - 1.0 / np.sum(x.conj()[..., 0] * y[..., 0], axis=1)
+                new = m - 1.0 / np.sum(x.conj() * y, axis=1)
         bad = ~np.isfinite(norm) | (norm == 0.0)
-        y = y / np.where(bad, 1.0, norm)[:, None, None]
+        y = y / np.where(bad, 1.0, norm)[:, None]
+        ay = (c @ _as_columns(y)[:, None]).view(complex)[..., 0]  # A0 y, A1 y, A2 y
         if update != "newton":
-            yh = y.conj()[..., 0]
-            qa = np.sum(yh * (c2 @ y)[..., 0], axis=1)
-            qb = np.sum(yh * (c1 @ y)[..., 0], axis=1)
-            qc = np.sum(yh * (c0 @ y)[..., 0], axis=1)
+            qc, qb, qa = np.einsum("sn,skn->ks", y.conj(), ay)
             disc = np.sqrt(qb * qb - 4.0 * qa * qc + 0j)
             r1, r2 = (-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa)
             new = np.where(np.abs(r1 - m) <= np.abs(r2 - m), r1, r2)
         bad |= ~np.isfinite(new)
-        done = np.abs(new - m) <= tol * np.maximum(1.0, np.abs(new))
-        mu[active], v[active] = new, y[..., 0]
+        n = norms if active.size == len(norms) else norms[active]
+        backward = np.linalg.norm(ay[:, 0] + new[:, None] * ay[:, 1] + (new * new)[:, None] * ay[:, 2], axis=1) / (
+            n[:, 0] + np.abs(new) * n[:, 1] + np.abs(new) ** 2 * n[:, 2])
+        done = (np.abs(new - m) <= tol * np.maximum(1.0, np.abs(new))) & (backward <= BACKWARD_TOL)
+        mu[active], v[active] = new, y
         converged[active[done & ~bad]] = True
         active = active[~done & ~bad]
     return mu, v, converged
+
+
+def _as_columns(x: np.ndarray) -> np.ndarray:
+    """Complex vectors ``(s, N)`` as real ``(s, N, 2)`` (re, im) columns, without a copy."""
+    return np.ascontiguousarray(x).view(float).reshape(x.shape + (2,))
 
 
 def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_walk=4, update="rayleigh"):
@@ -527,7 +555,7 @@ def _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, *, max_w
         other = np.flatnonzero(~conj)
         if other.size:
             s_other = open_[other]
-            start = np.stack([_shift_harmonics(v[s], ndof, harmonics, int(j)) for s, j in zip(s_other, k[other])])
+            start = _shift_harmonics(v[s_other], ndof, harmonics, k[other])
             target = mu[s_other] + 1j * k[other]
             r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, owner[s_other], target, start, update=update)
             nb_mu[other], nb_v[other] = r_mu, r_v
@@ -550,28 +578,28 @@ def _real_line(mu):
     return [complex(x.real, h) if ok else None for x, h, ok in zip(mu, half, near)]
 
 
-def _split_real_seeds(a0, a1, a2, owner, seed_mu, seed_v, mu, converged, ndof, harmonics):
+def _split_real_seeds(a0, a1, a2, owner, seed_mu, seed_v, mu, v, converged, ndof, harmonics):
     """The failed seeds near a real multiplier's line (:data:`SPLIT_REAL_WINDOW`) replaced by two
     starts on it, refined and walked (batched, the Newton update); a pair is kept converged only
-    if both land on real multipliers' families. Returns ``(owner, mu, converged)``."""
+    if both land on real multipliers' families. Returns ``(owner, mu, v, converged)``."""
     failed = np.flatnonzero(~converged)
     line = _real_line(seed_mu[failed])
     failed = np.asarray([f for f, x in zip(failed, line) if x is not None], dtype=int)
     if failed.size == 0:
-        return owner, mu, converged
+        return owner, mu, v, converged
     centre = np.asarray([x for x in line if x is not None])
     starts = np.concatenate([centre - SPLIT_REAL_OFFSET, centre + SPLIT_REAL_OFFSET])
     pair_owner = np.concatenate([owner[failed], owner[failed]])
     pair_v = np.concatenate([seed_v[failed], seed_v[failed]])
     r_mu, r_v, r_ok = _batched_refine(a0, a1, a2, pair_owner, starts, pair_v, update="newton")
-    r_mu, _, _, r_ok = _batched_walk(a0, a1, a2, pair_owner, r_mu, r_v, r_ok, ndof, harmonics, update="newton")
+    r_mu, r_v, _, r_ok = _batched_walk(a0, a1, a2, pair_owner, r_mu, r_v, r_ok, ndof, harmonics, update="newton")
     r_ok &= np.abs(2.0 * r_mu.imag - np.round(2.0 * r_mu.imag)) <= 2 * SELF_CONJUGATE_TOL
     both = r_ok[: failed.size] & r_ok[failed.size :]
     r_ok = np.concatenate([both, both])
     keep = np.ones(len(mu), dtype=bool)
     keep[failed] = False
     return (np.concatenate([owner[keep], pair_owner]), np.concatenate([mu[keep], r_mu]),
-            np.concatenate([converged[keep], r_ok]))
+            np.concatenate([v[keep], r_v]), np.concatenate([converged[keep], r_ok]))
 
 
 def _batch_seed_harmonics(harmonics: int) -> int:
@@ -595,57 +623,129 @@ def _seed_picks(mu, mult, key, need: int, near_zero) -> list[int]:
             if not (mu[i].imag < -tol and any(abs(mu[i].conjugate() - mu[j]) <= tol for j in picks))]
 
 
+def _subproblem_seeds(a0, a1, a2, ndof: int, harmonics: int, zero_tol):
+    """The seeds of every point from its sub-problem (:func:`_batch_seed_harmonics`), one stacked
+    eigen-decomposition: ``(owner, mu, v, want)``, seed ``s`` of point ``owner[s]``, ``want[k]``
+    the number of exponents point ``k`` needs (``2n`` less its trivial ones)."""
+    m, size = a0.shape[0], a0.shape[-1]
+    seed = _batch_seed_harmonics(harmonics)
+    win = _window(ndof, harmonics, seed)
+    mu_s, vec_s = np.linalg.eig(_companion(*(x[:, win][:, :, win] for x in (a0, a1, a2))))
+    vec_s = vec_s[:, : win.size]
+    key = centrality(mu_s, harmonic_centre(vec_s, ndof, seed)).tolist()
+    mult_s = np.exp(2.0 * np.pi * mu_s).tolist()
+    mu_list = mu_s.tolist()
+    owner, picks_of, want = [], [], []
+    for k in range(m):
+        near_zero = _trivial(mu_s[k], zero_tol) if zero_tol is not None else []
+        picks = _seed_picks(mu_list[k], mult_s[k], key[k], 2 * ndof - len(near_zero), set(near_zero))
+        want.append(2 * ndof - len(near_zero))
+        owner.extend([k] * len(picks))
+        picks_of.extend(picks)
+    owner, picks_of = np.asarray(owner, dtype=int), np.asarray(picks_of, dtype=int)
+    v0 = np.zeros((len(owner), size), dtype=complex)
+    if len(owner):
+        v0[:, win] = vec_s[owner, :, picks_of]
+        v0 /= np.linalg.norm(v0, axis=1, keepdims=True)
+    return owner, mu_s[owner, picks_of], v0, want
+
+
+def _settle_seeds(a0, a1, a2, owner, seed_mu, seed_v, want, ndof: int, harmonics: int, copy_tol: float,
+                  update: str):
+    """Refine, walk and (near a real multiplier's line) split the seeds of every point, stacked.
+
+    **Returns:** ``(found, families)``: per point the exponents (``None`` where not settled,
+    see :func:`refined_central_batch`), and per settled point its families' representatives
+    ``(mu, v)`` (refined eigenpairs on their most central members, one per family and complex
+    pair), which seed the neighbours of :func:`neighbour_seeded_central`."""
+    m = len(want)
+    mu, v, converged = _batched_refine(a0, a1, a2, owner, seed_mu, seed_v, update=update)
+    mu, v, _, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, update=update)
+    owner, mu, v, converged = _split_real_seeds(a0, a1, a2, owner, seed_mu, seed_v, mu, v, converged, ndof,
+                                                harmonics)
+    settled = np.ones(m, dtype=bool)
+    np.logical_and.at(settled, owner, converged)
+    mu_list, owner_list = mu.tolist(), owner.tolist()
+    found_of: list[list[complex]] = [[] for _ in range(m)]
+    reps_of: list[list[int]] = [[] for _ in range(m)]
+    for s, (k, x) in enumerate(zip(owner_list, mu_list)):
+        found = found_of[k]
+        if any(abs(x - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
+            continue  # two seeds walked to one member
+        found.append(x)
+        reps_of[k].append(s)
+        if not _is_self_conjugate(x):
+            found.append(x.conjugate())
+    out: list = [None] * m
+    families: list = [None] * m
+    for k in range(m):
+        if settled[k]:
+            out[k] = _distinct_families(found_of[k], want[k], copy_tol)
+            if out[k] is not None:
+                families[k] = (mu[reps_of[k]], v[reps_of[k]])
+    return out, families
+
+
 def refined_central_batch(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
-                          update: str = "rayleigh"):
+                          update: str = "rayleigh", families: bool = False):
     """:func:`refined_central` for a stack of points: a list with ``None`` where a point is not
     settled this way (a refinement or a walk step did not converge onto the expected copy, or
-    not ``2n`` distinct families were found). `update`: see :func:`_batched_refine`.
+    not ``2n`` distinct families were found). `update`: see :func:`_batched_refine`;
+    `families`: also return the settled points' representatives (see :func:`_settle_seeds`).
 
     The seed sub-problems (:func:`_batch_seed_harmonics`) are one stacked eigen-decomposition,
     every refinement step and every walk step one stacked solve over all points: this removes
     the per-point call overhead that dominates small problems (Duffing, H = 7).
     """
-    m, size = a0.shape[0], a0.shape[-1]
-    seed = _batch_seed_harmonics(harmonics)
-    win = _window(ndof, harmonics, seed)
     with single_thread_blas():
-        mu_s, vec_s = np.linalg.eig(_companion(*(x[:, win][:, :, win] for x in (a0, a1, a2))))
-        vec_s = vec_s[:, : win.size]
-        key = centrality(mu_s, harmonic_centre(vec_s, ndof, seed)).tolist()
-        mult_s = np.exp(2.0 * np.pi * mu_s).tolist()
-        mu_list = mu_s.tolist()
-        owner, picks_of, want = [], [], []
-        for k in range(m):
-            near_zero = _trivial(mu_s[k], zero_tol) if zero_tol is not None else []
-            picks = _seed_picks(mu_list[k], mult_s[k], key[k], 2 * ndof - len(near_zero), set(near_zero))
-            want.append(2 * ndof - len(near_zero))
-            owner.extend([k] * len(picks))
-            picks_of.extend(picks)
-        owner = np.asarray(owner, dtype=int)
-        v0 = np.zeros((len(owner), size), dtype=complex)
-        if len(owner):
-            v0[:, win] = vec_s[owner, :, np.asarray(picks_of, dtype=int)]
-            v0 /= np.linalg.norm(v0, axis=1, keepdims=True)
-        mu, v, converged = _batched_refine(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0,
-                                           update=update)
-        mu, v, centre, converged = _batched_walk(a0, a1, a2, owner, mu, v, converged, ndof, harmonics, update=update)
-        owner, mu, converged = _split_real_seeds(a0, a1, a2, owner, mu_s[owner, np.asarray(picks_of, dtype=int)], v0,
-                                                 mu, converged, ndof, harmonics)
+        owner, seed_mu, seed_v, want = _subproblem_seeds(a0, a1, a2, ndof, harmonics, zero_tol)
+        out, reps = _settle_seeds(a0, a1, a2, owner, seed_mu, seed_v, want, ndof, harmonics, copy_tol, update)
+    return (out, reps) if families else out
+
+
+#: :func:`central_exponents` seeds one point in this many along a stack of consecutive points
+#: from its own sub-problem and the others from the nearest such point's refined families (the
+#: stacked eigen-decompositions of the seeds were ~30 % of Hill's time on the Duffing curve).
+NEIGHBOUR_STRIDE = 4
+
+
+def neighbour_seeded_central(a0, a1, a2, ndof: int, harmonics: int, *, copy_tol: float = 1e-6,
+                             stride: int = NEIGHBOUR_STRIDE):
+    """Central exponents of consecutive points of a branch, most of them seeded by a neighbour.
+
+    Every `stride`-th point (and the last) is settled from its own sub-problem
+    (:func:`refined_central_batch`); every other point's seeds are the refined families of the
+    nearest such settled point, refined, walked and split on the point's own matrices
+    (:func:`_settle_seeds`) and accepted by the same test (every refinement converged onto its
+    expected copy, ``2n`` distinct families). A list with ``None`` where a point is not settled:
+    :func:`central_exponents` then seeds it from its own sub-problem. Not for problems whose
+    trivial exponents are dropped (their number may change from one point to the next).
+    """
+    m = a0.shape[0]
+    anchors = np.unique(np.append(np.arange(0, m, stride), m - 1))
     out: list = [None] * m
-    settled = np.ones(m, dtype=bool)
-    np.logical_and.at(settled, owner, converged)
-    mu_list, owner_list = mu.tolist(), owner.tolist()
-    found_of: list[list[complex]] = [[] for _ in range(m)]
-    for k, x in zip(owner_list, mu_list):
-        found = found_of[k]
-        if any(abs(x - f) <= 1e-9 * max(1.0, abs(f)) for f in found):
-            continue  # two seeds walked to one member
-        found.append(x)
-        if not _is_self_conjugate(x):
-            found.append(x.conjugate())
-    for k in range(m):
-        if settled[k]:
-            out[k] = _distinct_families(found_of[k], want[k], copy_tol)
+    with single_thread_blas():
+        found, reps = refined_central_batch(a0[anchors], a1[anchors], a2[anchors], ndof, harmonics,
+                                            copy_tol=copy_tol, families=True)
+        settled = [a for a, r in zip(anchors, reps) if r is not None]
+        for a, mu in zip(anchors, found):
+            out[a] = mu
+        if not settled:
+            return out
+        reps_at = dict(zip(anchors.tolist(), reps))
+        settled = np.asarray(settled)
+        others = np.setdiff1d(np.arange(m), anchors)
+        if others.size == 0:
+            return out
+        nearest = settled[np.argmin(np.abs(others[:, None] - settled[None, :]), axis=1)]
+        owner = np.concatenate([np.full(len(reps_at[a][0]), j) for j, a in enumerate(nearest.tolist())])
+        seed_mu = np.concatenate([reps_at[a][0] for a in nearest.tolist()])
+        seed_v = np.concatenate([reps_at[a][1] for a in nearest.tolist()])
+        want = [2 * ndof] * len(others)
+        found, _ = _settle_seeds(a0[others], a1[others], a2[others], owner, seed_mu, seed_v, want, ndof,
+                                 harmonics, copy_tol, "rayleigh")
+    for k, mu in zip(others.tolist(), found):
+        out[k] = mu
     return out
 
 
@@ -665,39 +765,59 @@ def _distinct_families(found, want: int, copy_tol: float):
 
 
 def central_exponents(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, copy_tol: float = 1e-6,
-                      method: str = "auto"):
+                      method: str = "auto", neighbours: bool = True, counts: dict | None = None):
     """Central exponents ``mu = lam / w`` of a stack of points, shapes ``(m, N, N)``.
 
-    `method`: ``"dense"`` (:func:`dense_central`) or ``"refined"`` (= ``"auto"``):
-    :func:`refined_central_batch` for all points, again with the Newton update where that was
-    not settled (the nearly merged real pairs of super-harmonic resonances), then
-    (``N > REFINE_MIN_SIZE``) :func:`refined_central` with its larger seed window, then
-    :func:`dense_central` (stacked) for the rest; the same exponents as the dense way.
-    Returns a list of ``m`` arrays.
+    `method`: ``"dense"`` (:func:`dense_central`) or ``"refined"`` (= ``"auto"``): with
+    `neighbours` (and no trivial exponents to drop) :func:`neighbour_seeded_central` first
+    (cheapest when the points are consecutive points of a branch; any stack is answered
+    right), then :func:`refined_central_batch` for the points not settled, again with the
+    Newton update where that was not settled (the nearly merged real pairs of super-harmonic
+    resonances), then (``N > REFINE_MIN_SIZE``) :func:`refined_central` with its larger seed
+    window, then :func:`dense_central` (stacked) for the rest; the same exponents as the dense
+    way. Returns a list of ``m`` arrays; `counts`, if given, receives how many points each
+    stage settled (keys ``"neighbour"``, ``"rayleigh"``, ``"newton"``, ``"single"``, ``"dense"``).
     """
     if method not in ("auto", "dense", "refined"):
         raise ValueError(f"method must be 'auto', 'dense' or 'refined', got {method!r}")
+    counts = {} if counts is None else counts
     if method == "dense":
+        counts["dense"] = len(a0)
         return [_snapped(mu) for mu in dense_central(a0, a1, a2, ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)]
+    m = len(a0)
     group = max(1, int(BATCH_BYTES // (16 * a0.shape[-1] ** 2)))  # keep the stacked pencils in cache
-    out: list = [None] * len(a0)
+    out: list = [None] * m
+
+    def settled(stage, before):
+        counts[stage] = counts.get(stage, 0) + before - sum(mu is None for mu in out)
+
+    if neighbours and zero_tol is None and m >= 2 * NEIGHBOUR_STRIDE:
+        block = max(group, 4 * NEIGHBOUR_STRIDE)
+        for lo in range(0, m, block):
+            hi = min(m, lo + block)
+            out[lo:hi] = neighbour_seeded_central(a0[lo:hi], a1[lo:hi], a2[lo:hi], ndof, harmonics,
+                                                  copy_tol=copy_tol, stride=NEIGHBOUR_STRIDE)
+        settled("neighbour", m)
     for update in ("rayleigh", "newton"):
-        todo = [k for k in range(len(out)) if out[k] is None]
+        todo = [k for k in range(m) if out[k] is None]
         for lo in range(0, len(todo), group):
             part = todo[lo : lo + group]
             found = refined_central_batch(a0[part], a1[part], a2[part], ndof, harmonics, zero_tol=zero_tol,
                                           copy_tol=copy_tol, update=update)
             for k, mu in zip(part, found):
                 out[k] = mu
+        settled(update, len(todo))
     if a0.shape[-1] > REFINE_MIN_SIZE:  # worth a second, better-seeded try before the dense way
-        for k in range(len(out)):
-            if out[k] is None:
-                out[k] = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
-    rest = [k for k in range(len(out)) if out[k] is None]
+        todo = [k for k in range(m) if out[k] is None]
+        for k in todo:
+            out[k] = refined_central(a0[k], a1[k], a2[k], ndof, harmonics, zero_tol=zero_tol, copy_tol=copy_tol)
+        settled("single", len(todo))
+    rest = [k for k in range(m) if out[k] is None]
     if rest:
         for k, mu in zip(rest, dense_central(a0[rest], a1[rest], a2[rest], ndof, harmonics,
                                              zero_tol=zero_tol, copy_tol=copy_tol)):
             out[k] = mu
+    counts["dense"] = counts.get("dense", 0) + len(rest)
     if len({len(mu) for mu in out}) == 1:  # one vectorised snap for the whole stack
         return list(_snapped(np.stack(out)))
     return [_snapped(mu) for mu in out]
