@@ -21,8 +21,11 @@ the same result:
   its family (``mu -> mu +- i``, eigenvector shifted by one harmonic) while ``|centre|``
   decreases: the centre falls by one per copy, so a local minimum along the family is the
   family's most central member, the one the dense selection keeps. A point is settled this way
-  only if every refinement converged onto the expected copy and ``2n`` families with distinct
-  multipliers were found; otherwise the dense way decides (:func:`central_exponents`).
+  only if every refinement converged (a step below :data:`STEP_TOL` and a backward error below
+  :data:`BACKWARD_TOL`) onto the expected copy and ``2n`` families with distinct multipliers
+  were found; otherwise the dense way decides (:func:`central_exponents`). Along a branch most
+  points take their seeds from a settled neighbour's families instead of their own
+  sub-problem (:func:`neighbour_seeded_central`), under the same acceptance test.
 
 Copies are recognised by their multiplier (to ``copy_tol``) and, for a real multiplier, as
 conjugates: the two members ``a +- i/2`` of a real negative multiplier's family (or ``a +- i k``
@@ -50,6 +53,7 @@ __all__ = [
     "hill_quadratic",
     "refined_central",
     "refined_central_batch",
+    "neighbour_seeded_central",
     "select_central",
     "central_exponents",
 ]
