@@ -477,3 +477,46 @@ def test_stable_verdicts_rows_follow_the_single_point_rule():
     assert [floquet.stable_verdict(Neutral(), p, m) for p, m in zip(ps[:40], mult[:40])] == want[:40]
     only_neutral = np.array([[np.exp(1j * 0.3), np.exp(-1j * 0.3)]])
     assert not floquet.stable_verdicts(Neutral(), [0.3], only_neutral)[0]  # nothing left: no verdict
+
+
+def test_a_point_whose_multipliers_fail_is_nan_and_named_and_its_batch_is_kept(monkeypatch):
+    """A batch that raises is redone point by point (Hill: its follower reset; the variational
+    equations: one integration a point): the good points keep their multipliers, the bad one is
+    NaN, its parameter named in the warning."""
+    from hbgear.engine import stability
+    from hbgear.engine.system import Duffing
+
+    from hbgear.engine.response import newton_solve
+
+    hb = HarmonicBalance(1, 5, 1, 64)
+    system = Duffing(0.02, 1.0, 0.1, 0.05)
+    ps = np.array([0.7, 0.8, 0.9, 1.3])
+    zs = np.stack([newton_solve(hb, system, p, np.zeros(hb.size), tolerance=1e-10).z for p in ps])
+    bad = 0.9
+    # the retried points are recomputed one by one: Hill's refinement from other seeds (to its
+    # refined tolerance), the variational equations with a step control of their own (VARIATIONAL_RTOL 1e-8)
+    for method, name, rtol in (("hill", "hill_exponents_along", 5e-12), ("variational", None, 1e-7)):
+        good = stability.branch_stability(hb, system, ps, zs, method=method, progress=False)
+        assert good.warning is None
+        with monkeypatch.context() as patch:
+            if name:  # the batch fails, then the one bad point
+                along, single = stability.hill_exponents_along, stability.hill_multipliers
+                patch.setattr(stability, name, lambda hb_, zs_, ps_, *a, **k: (
+                    _raise() if bad in ps_ else along(hb_, zs_, ps_, *a, **k)))
+                patch.setattr(stability, "hill_multipliers", lambda hb_, z, p, *a, **k: (
+                    _raise() if p == bad else single(hb_, z, p, *a, **k)))
+            else:
+                from hbgear.engine import monodromy
+
+                integrate = monodromy.monodromy_variational
+                patch.setattr(monodromy, "monodromy_variational", lambda system_, ps_, *a, **k: (
+                    _raise() if bad in np.atleast_1d(ps_) else integrate(system_, ps_, *a, **k)))
+            broken = stability.branch_stability(hb, system, ps, zs, method=method, progress=False)
+        assert "failed at 1 point(s)" in broken.warning and "p = 0.9: RuntimeError: injected" in broken.warning
+        assert np.isnan(broken.max_abs[2]) and np.isnan(broken.stable[2])
+        for i in (0, 1, 3):
+            np.testing.assert_allclose(broken.multipliers[i], good.multipliers[i], rtol=rtol)
+
+
+def _raise():
+    raise RuntimeError("injected")

@@ -125,21 +125,31 @@ def _hill_in_batches(hb, system, ps, zs, indices, out, progress, label) -> list[
         follower = hill_follower(hb, system)
         for lo in range(0, len(run), HILL_BATCH):
             batch = run[lo:lo + HILL_BATCH]
-            try:
-                for i, (_, m) in zip(batch, hill_exponents_along(hb, zs[batch], ps[batch], system, follower)):
-                    out[i] = np.asarray(m)
-            except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
-                follower.reset()
-                for i in batch:
-                    try:
-                        out[i] = np.asarray(hill_multipliers(hb, zs[i], float(ps[i]), system))
-                    except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
-                        failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
+            _fill(batch, lambda rows: [m for _, m in hill_exponents_along(hb, zs[rows], ps[rows], system, follower)],
+                  lambda i: hill_multipliers(hb, zs[i], float(ps[i]), system), out, ps, failures,
+                  on_batch_failure=follower.reset)
             if bar is not None:
                 bar.update(len(batch))
     if bar is not None:
         bar.close()
     return failures
+
+
+def _fill(batch, many, one, out, ps, failures, on_batch_failure=None) -> None:
+    """``out[i] = many(batch)[k]`` for the points ``i = batch[k]``; if that fails, ``out[i] = one(i)``
+    point by point (after `on_batch_failure`), a failing point's message appended to `failures`."""
+    try:
+        for i, m in zip(batch, many(batch)):
+            out[i] = np.asarray(m)
+        return
+    except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
+        if on_batch_failure is not None:
+            on_batch_failure()
+    for i in batch:
+        try:
+            out[i] = np.asarray(one(i))
+        except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
+            failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
 
 
 def _jumps_with_the_state(system, p) -> bool:
@@ -173,15 +183,7 @@ def _variational_in_batches(hb, system, ps, zs, indices, out, progress, label) -
     bar = _progress(len(indices), label, progress)
     for lo in range(0, len(indices), VARIATIONAL_POINTS):
         batch = list(indices[lo:lo + VARIATIONAL_POINTS])
-        try:
-            for i, m in zip(batch, multipliers(batch)):
-                out[i] = np.asarray(m)
-        except Exception:  # noqa: BLE001 -- find the bad point(s), keep the others
-            for i in batch:
-                try:
-                    out[i] = np.asarray(multipliers([i])[0])
-                except Exception as exc:  # noqa: BLE001 -- one bad point must not lose the curve
-                    failures.append(f"p = {ps[i]:.9g}: {type(exc).__name__}: {exc}")
+        _fill(batch, multipliers, lambda i: multipliers([i])[0], out, ps, failures)
         if bar is not None:
             bar.update(len(batch))
     if bar is not None:
