@@ -210,27 +210,29 @@ def test_neighbour_seeded_exponents_equal_the_dense_way_in_path_order_and_shuffl
     shuffled = np.random.default_rng(1).permutation(len(ps))
     for order in (np.arange(len(ps)), shuffled):
         counts = {}
-        got = hill.central_exponents(a0[order], a1[order], a2[order], 1, 7, counts=counts)
+        got = hill.central_exponents(a0[order], a1[order], a2[order], 1, 7, neighbours=True, counts=counts)
         for mu, k in zip(got, order):
             assert max_pair_distance(np.exp(2 * np.pi * mu), np.exp(2 * np.pi * dense[k])) < REFINED_TOL
         assert sum(counts.values()) == len(ps)
         if order is not shuffled:
             assert counts["neighbour"] >= 0.9 * len(ps), counts
     counts = {}
-    hill.central_exponents(a0, a1, a2, 1, 7, neighbours=False, counts=counts)
+    hill.central_exponents(a0, a1, a2, 1, 7, counts=counts)  # the default: every point its own seeds
     assert "neighbour" not in counts and counts["rayleigh"] >= 0.9 * len(ps)
 
 
 def test_batched_hill_equals_per_point_on_a_duffing_curve():
-    """The stacked way (most points seeded by a neighbour's families) and one call per point (own
-    seeds) both give the dense way's exponents; they took different refinement paths, so they
-    agree with each other only to twice the refined tolerance (4e-12 measured at w = 1.065, where
-    the batch was within 6e-15 of the dense way)."""
+    """The stacked way, its seeding by neighbours along the branch (`hill_exponents_along` of a
+    small problem) and one call per point all give the dense way's exponents; the neighbours'
+    refinement takes other paths, so it agrees with the others to twice the refined tolerance
+    (4e-12 measured at w = 1.065, where it was within 6e-15 of the dense way)."""
     hb, system, zs, ps = duffing_points(40)
     batch = floquet.hill_exponents_batch(hb, zs, ps, system)
-    assert len(batch) == len(ps)
+    along = floquet.hill_exponents_along(hb, zs, ps, system)  # N = 15: the batch seeded by neighbours
+    assert len(batch) == len(along) == len(ps)
     unstable = 0
-    for (lam, mult), z, p in zip(batch, zs, ps):
+    for (lam, mult), (_, mult_n), z, p in zip(batch, along, zs, ps):
+        assert max_pair_distance(mult_n, mult) < 2 * REFINED_TOL
         lam1, mult1 = floquet.hill_exponents(hb, z, p, system)
         lamd, multd = floquet.hill_exponents(hb, z, p, system, method="dense")
         assert max_pair_distance(mult, multd) < REFINED_TOL

@@ -187,14 +187,15 @@ def _exponents_and_multipliers(mu, w):
 
 
 def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_tol: float = 1e-6,
-                         method: str = "auto"):
+                         method: str = "auto", neighbours: bool = False):
     """:func:`hill_exponents` at many points ``(zs[i], ps[i])`` of one problem, as a list.
 
     The Hill matrices come from one jitted, vmapped call per chunk of points
     (:func:`hbgear.engine.hill.hill_pencils`); the refinement runs stacked over all points
-    (:func:`hbgear.engine.hill.central_exponents`: points in order along a branch are mostly
-    seeded by a settled neighbour, :func:`hbgear.engine.hill.neighbour_seeded_central`; any
-    order gives the same exponents). On the Duffing benchmark (H = 7) this is ~13x cheaper per
+    (:func:`hbgear.engine.hill.central_exponents`; with `neighbours`, for consecutive close
+    points of a branch, most are seeded by a settled neighbour,
+    :func:`hbgear.engine.hill.neighbour_seeded_central`: the same exponents, 1.45x faster on
+    the NLTV pair's curve at H = 10). On the Duffing benchmark (H = 7) this is ~13x cheaper per
     point than one call per point.
     """
     from .hill import central_exponents, hill_quadratic
@@ -204,7 +205,7 @@ def hill_exponents_batch(hb, zs, ps, system, *, drop_trivial: bool = True, copy_
         return []
     a0, a1, a2, w = hill_quadratic(hb, zs, ps, system)
     mus = central_exponents(a0, a1, a2, hb.ndof, hb.harmonics, zero_tol=_zero_tol(system, drop_trivial),
-                            copy_tol=copy_tol, method=method)
+                            copy_tol=copy_tol, method=method, neighbours=neighbours)
     if len({len(mu) for mu in mus}) == 1:  # one vectorised sort for the whole stack
         lam, mult = _exponents_and_multipliers(np.stack(mus), w)
         return list(zip(lam, mult))
@@ -242,7 +243,7 @@ def hill_exponents_along(hb, zs, ps, system, follower=None, **kwargs):
     follower = hill_follower(hb, system, **kwargs) if follower is None else follower
     if hb.size <= FOLLOW_MIN_SIZE or follower.zero_tol is not None:
         return hill_exponents_batch(hb, zs, ps, system, drop_trivial=follower.zero_tol is not None,
-                                    copy_tol=follower.copy_tol)
+                                    copy_tol=follower.copy_tol, neighbours=True)
     zs = np.atleast_2d(np.asarray(zs, dtype=float))
     prepared = hb.prepare(system)
     out = []
