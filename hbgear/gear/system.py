@@ -82,6 +82,17 @@ class GearSystem(PeriodicSystem):
         return not excitation or m.friction.name in ("none", "coulomb")
 
     @property
+    def forcing_mean_affine_in_frequency(self) -> bool:
+        """True when, besides :attr:`forcing_affine_in_frequency`, ``Fbar(w)`` is affine in ``w``:
+        the torques are constant and the mesh term's mean affine; what is not is the soft spring's
+        wind-up ``u_s(w)``, which balances the mean static friction force: constant without
+        friction and for Coulomb's law (the sign of the sliding velocity, proportional to the
+        speed, does not change with it), a function of the speed for laws with a velocity scale.
+        Checked numerically by the harmonic balance."""
+        m = self.model
+        return self.forcing_affine_in_frequency and (m.boundary != "spring" or m.friction.name in ("none", "coulomb"))
+
+    @property
     def nonlinear_force_uses_displacement(self) -> bool:
         """False when ``Q_nl`` depends on the velocities only: NLTV friction in formulation A
         (loads quasi-static, ``mu`` from the sliding and rolling velocities) without backlash.
