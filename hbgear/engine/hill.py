@@ -349,34 +349,16 @@ def _shift_harmonics(v: np.ndarray, ndof: int, harmonics: int, k) -> np.ndarray:
     return out.reshape(v.shape) if single else out.reshape(len(x), -1)
 
 
-def _rayleigh_root(a0, a1, a2, v, near):
-    """The root of ``v^H P(mu) v = 0`` nearest `near`."""
-    a, b, c = np.vdot(v, a2 @ v), np.vdot(v, a1 @ v), np.vdot(v, a0 @ v)
-    disc = np.sqrt(b * b - 4.0 * a * c + 0j)
-    roots = ((-b + disc) / (2.0 * a), (-b - disc) / (2.0 * a))
-    return min(roots, key=lambda r: abs(r - near))
-
-
 def _refine(a0, a1, a2, mu, v, *, tol=STEP_TOL, max_steps=8, fixed_steps=0):
-    """Inverse iteration with the Rayleigh functional: ``v <- P(mu)^-1 P'(mu) v``, then ``mu``
-    the root of ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than
-    ``tol max(1, |mu|)`` (see :data:`STEP_TOL`); the first `fixed_steps` steps keep the shift
-    (plain inverse iteration: picks the exponent nearest `mu` out of a close pair).
+    """Inverse iteration with the Rayleigh functional on one point's matrices ``(N, N)``:
+    :func:`_batched_refine` with one seed (``v <- P(mu)^-1 P'(mu) v``, then ``mu`` the root of
+    ``v^H P(mu) v = 0`` nearest the last one, until ``mu`` moves less than ``tol max(1, |mu|)``
+    at a backward error below :data:`BACKWARD_TOL`); the first `fixed_steps` steps keep the
+    shift (plain inverse iteration: picks the exponent nearest `mu` out of a close pair).
     Returns ``(mu, v, converged)``."""
-    for step in range(max_steps):
-        lu = scipy.linalg.lu_factor(a0 + mu * a1 + (mu * mu) * a2, check_finite=False)
-        x = scipy.linalg.lu_solve(lu, a1 @ v + (2.0 * mu) * (a2 @ v), check_finite=False)
-        norm = np.linalg.norm(x)
-        if not np.isfinite(norm) or norm == 0.0:
-            return mu, v, False
-        v = x / norm
-        if step < fixed_steps:
-            continue
-        new = _rayleigh_root(a0, a1, a2, v, mu)
-        step, mu = abs(new - mu), new
-        if step <= tol * max(1.0, abs(mu)):
-            return mu, v, True
-    return mu, v, False
+    m, x, ok = _batched_refine(a0[None], a1[None], a2[None], np.zeros(1, dtype=int), np.array([mu], dtype=complex),
+                               np.asarray(v, dtype=complex)[None], tol=tol, max_steps=max_steps, fixed_steps=fixed_steps)
+    return complex(m[0]), x[0], bool(ok[0])
 
 
 def _is_conjugate_copy(mu, k) -> bool:
@@ -479,12 +461,14 @@ def refined_central(a0, a1, a2, ndof: int, harmonics: int, *, zero_tol=None, cop
 BACKWARD_TOL = 1e-13
 
 
-def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, update="rayleigh"):
-    """:func:`_refine` for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
-    stacked solve per step over the seeds not yet converged. Returns ``(mu, v, converged)``.
+def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, update="rayleigh", fixed_steps=0):
+    """Inverse iteration for many seeds at once (seed ``s`` belongs to point ``owner[s]``): one
+    stacked solve per step over the seeds not yet converged; the first `fixed_steps` steps keep
+    the shifts. Converged: a step below ``tol max(1, |mu|)`` at a backward error below
+    :data:`BACKWARD_TOL`. Returns ``(mu, v, converged)``.
 
     `update` of ``mu`` after the step ``x = P(mu)^-1 P'(mu) v`` (``|v| = 1``): ``"rayleigh"``,
-    the root of ``x^H P(mu') x = 0`` nearest ``mu`` (:func:`_refine`), or ``"newton"``,
+    the root of ``x^H P(mu') x = 0`` nearest ``mu``, or ``"newton"``,
     ``mu' = mu - 1 / (v^H x)`` (nonlinear inverse iteration, Ruhe 1973: quadratic convergence
     to a simple exponent). Where two real exponents are about to merge into a complex pair
     (the nearly parallel eigenvectors of a super-harmonic resonance) the roots of the Rayleigh
@@ -498,7 +482,7 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, upda
     # matmul on the complex vectors' (re, im) columns (a real @ complex matmul copies the matrix to complex)
     stacked = np.stack([a0, a1, a2], axis=1)[owner]
     norms = np.sqrt(np.einsum("skij,skij->sk", stacked, stacked))  # |A0|, |A1|, |A2| (Frobenius)
-    for _ in range(max_steps):
+    for step in range(max_steps):
         if active.size == 0:
             break
         c = stacked if active.size == len(stacked) else stacked[active]
@@ -520,6 +504,10 @@ def _batched_refine(a0, a1, a2, owner, mu, v, *, tol=STEP_TOL, max_steps=8, upda
                 new = m - 1.0 / np.sum(x.conj() * y, axis=1)
         bad = ~np.isfinite(norm) | (norm == 0.0)
         y = y / np.where(bad, 1.0, norm)[:, None]
+        if step < fixed_steps:  # plain inverse iteration: the shift kept
+            v[active] = np.where(bad[:, None], x, y)
+            active = active[~bad]
+            continue
         ay = (c @ _as_columns(y)[:, None]).view(complex)[..., 0]  # A0 y, A1 y, A2 y
         if update != "newton":
             qc, qb, qa = np.einsum("sn,skn->ks", y.conj(), ay)
