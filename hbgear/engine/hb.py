@@ -366,7 +366,7 @@ class HarmonicBalance:
         too: a constant load, say) and the point values confirm it at ``p_c``, the point term is
         left out (``point_a``, ``point_slope``, ``s_star`` ``None``): no evaluation of the force
         is traced into the residual, which is then a smaller program (the LTV example's
-        corrector: its trace 0.38 -> 0.22 s, its compilation 1.13-1.26 -> 0.88-0.96 s).
+        corrector: its trace 0.38 -> 0.22 s, its compilation 1.06-1.26 -> 0.88-0.96 s).
 
         **Returns:** ``None`` or the :class:`ForcingPieces` ``(F_hat_a, dF_hat/dw, w_a, f_a, df/dw, s_*)``.
         """
