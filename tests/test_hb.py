@@ -283,23 +283,23 @@ def test_frozen_operator_and_forcing_pieces_equal_the_full_construction(override
             assert float(jnp.max(jnp.abs(got_dp - want_dp))) <= 1e-11 * scale / w
 
 
-def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
-    """A system that declares an affine forcing but is not: the check at a third speed refuses the
-    pieces and the residual uses the quadrature (LTV arctan friction makes the forcing nonlinear in w)."""
+def _gear_system_claiming(fact: str):
+    """A :class:`GearSystem` class (a JAX pytree, as the gear pair is) that declares the system
+    fact `fact` true whatever its model: the harmonic balance must check the claim, not trust it."""
     from dataclasses import dataclass
 
     from jax.tree_util import register_dataclass
 
-    @register_dataclass
-    @dataclass(frozen=True)
-    class ClaimsAffine(GearSystem):
-        @property
-        def forcing_affine_in_frequency(self):
-            return True
+    return register_dataclass(dataclass(frozen=True)(type(f"Claims_{fact}", (GearSystem,),
+                                                          {fact: property(lambda self: True)})))
 
+
+def test_forcing_pieces_are_refused_when_the_declared_structure_does_not_hold():
+    """A system that declares an affine forcing but is not: the check at a third speed refuses the
+    pieces and the residual uses the quadrature (LTV arctan friction makes the forcing nonlinear in w)."""
     model = model_with("friction.model=LTV", "friction.law=arctan", "friction.formulation='A'")
-    honest, liar = GearSystem(model), ClaimsAffine(model)
-    assert not honest.forcing_affine_in_frequency
+    honest, liar = GearSystem(model), _gear_system_claiming("forcing_affine_in_frequency")(model)
+    assert not honest.forcing_affine_in_frequency and liar.forcing_affine_in_frequency
     hb = HarmonicBalance(model.ndof, 8, 1, 64)
     quad = hb.prepare(liar)
     assert quad.frozen is not None and quad.frozen.forcing is None
@@ -312,20 +312,9 @@ def test_a_mean_forcing_declared_affine_but_not_keeps_its_point_term():
     """A system that declares its mean forcing affine in w when it is not (the soft spring's
     wind-up follows the arctan law's mean friction): the check at a third speed keeps the point
     evaluation, and the residual equals the honest system's."""
-    from dataclasses import dataclass
-
-    from jax.tree_util import register_dataclass
-
-    @register_dataclass
-    @dataclass(frozen=True)
-    class ClaimsAffineMean(GearSystem):
-        @property
-        def forcing_mean_affine_in_frequency(self):
-            return True
-
     model = model_with("friction.model=NLTV", "friction.law=arctan")
-    honest, liar = GearSystem(model), ClaimsAffineMean(model)
-    assert not honest.forcing_mean_affine_in_frequency
+    honest, liar = GearSystem(model), _gear_system_claiming("forcing_mean_affine_in_frequency")(model)
+    assert not honest.forcing_mean_affine_in_frequency and liar.forcing_mean_affine_in_frequency
     hb = HarmonicBalance(model.ndof, 8, 1, 64)
     quad = hb.prepare(liar)
     assert quad.frozen is not None and quad.frozen.forcing is not None and quad.frozen.forcing.s_star is not None
